@@ -1,0 +1,164 @@
+"""Tests of the ShellMesh data model: edges, boundary, normals, validation, concatenation."""
+import numpy as np
+import pytest
+
+from shellmesh_mdao.errors import MeshValidationError
+from shellmesh_mdao.mesh import ShellMesh, concatenate, edge_topology, merge_close_points
+
+
+def unit_cube() -> ShellMesh:
+    p = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                  [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    # outward-oriented quads
+    f = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    return ShellMesh(p, f, np.arange(6) % 2, ["even", "odd"])
+
+
+def t_junction() -> ShellMesh:
+    """Skin plate (two quads) with a rib standing on the middle line: the junction edge has 3 faces."""
+    p = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0],
+                  [1, 0, 1], [1, 1, 1]], float)
+    f = [[0, 1, 4, 3], [1, 2, 5, 4], [1, 6, 7, 4]]
+    return ShellMesh(p, f, [0, 0, 1], ["skin", "rib"], feature_edges=[[1, 4]], feature_edge_ids=[1])
+
+
+def test_mixed_faces_and_padding():
+    p = np.zeros((4, 3))
+    p[1, 0] = p[2, 1] = 1
+    p[3] = [1, 1, 0]
+    m = ShellMesh(p, np.array([[0, 1, 2]]))
+    assert m.faces.shape == (1, 4) and m.faces[0, 3] == -1
+    assert m.n_tris == 1 and m.n_quads == 0
+
+
+def test_cube_topology_closed():
+    m = unit_cube()
+    t = m.topology()
+    assert len(t.edges) == 12
+    assert (t.valence == 2).all()
+    assert m.is_closed()
+    assert len(m.boundary_edges()) == 0
+    assert m.n_bodies() == 1
+    assert m.check().ok
+    # Euler characteristic of a sphere
+    assert m.n_points - len(t.edges) + m.n_faces == 2
+
+
+def test_cube_normals_outward_and_area():
+    m = unit_cube()
+    c = m.face_centroids()
+    n = m.face_normals()
+    assert np.allclose((n * (c - 0.5)).sum(1), 0.5)
+    assert np.allclose(m.face_areas(), 1.0)
+    vn = m.vertex_normals()
+    assert np.allclose(np.linalg.norm(vn, axis=1), 1)
+    # corner normal points along the diagonal from the centre
+    d = m.points - 0.5
+    assert np.allclose(vn, d / np.linalg.norm(d, axis=1, keepdims=True))
+
+
+def test_nonmanifold_junction_edge_has_three_faces():
+    m = t_junction()
+    t = m.topology()
+    e = t.edge_ids([[4, 1]])[0]
+    assert e >= 0 and t.valence[e] == 3
+    assert sorted(t.faces_of(e).tolist()) == [0, 1, 2]
+    assert m.nonmanifold_edges().tolist() == [[1, 4]]
+    # a crossing edge with four faces
+    p = np.vstack([m.points, [[1, 0, -1], [1, 1, -1]]])
+    f = np.vstack([m.faces, [[1, 4, 9, 8]]])
+    m4 = ShellMesh(p, f, [0, 0, 1, 2])
+    t4 = m4.topology()
+    assert t4.valence[t4.edge_ids([[1, 4]])[0]] == 4
+    assert m4.check().ok
+
+
+def test_check_finds_each_problem():
+    p = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [5, 5, 5], [1, 1, 0]], float)
+    m = ShellMesh(p, [[0, 1, 2, -1], [0, 1, 1, -1], [0, 3, 2, -1]])
+    c = m.check()
+    assert c.duplicate_points.tolist() == [[2, 5]]
+    assert c.degenerate_faces.tolist() == [1]
+    assert sorted(c.unreferenced_points.tolist()) == [4, 5]
+    # faces 0 and 2 run along edge 0-2 in the same direction: inconsistent orientation
+    assert c.inconsistent_edges.tolist() == [[0, 2]]
+    with pytest.raises(MeshValidationError, match="coincident nodes"):
+        m.validate()
+
+
+def test_check_finds_hanging_node():
+    p = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [2, 1, 0], [3, 0, 0], [3, 2, 0]], float)
+    m = ShellMesh(p, [[0, 1, 2, 3], [1, 5, 4, -1], [4, 5, 6, -1], [4, 6, 2, -1]])
+    assert m.check().hanging_nodes.tolist() == [[1, 2, 4]]
+    # the conforming version (left quad split at node 4) has none
+    m2 = ShellMesh(p, [[0, 1, 4, 3], [3, 4, 2, -1], [1, 5, 4, -1], [4, 5, 6, -1], [4, 6, 2, -1]])
+    assert len(m2.check().hanging_nodes) == 0
+
+
+def test_nan_points_reported():
+    p = np.array([[0, 0, 0], [1, 0, np.nan], [0, 1, 0]], float)
+    c = ShellMesh(p, [[0, 1, 2]]).check()
+    assert c.nonfinite_points.tolist() == [1] and not c.ok
+
+
+def test_bad_indices_rejected():
+    with pytest.raises(MeshValidationError, match="out of range"):
+        ShellMesh(np.zeros((3, 3)), [[0, 1, 3]])
+    with pytest.raises(MeshValidationError, match="component"):
+        ShellMesh(np.zeros((3, 3)), [[0, 1, 2]], component=[0, 1])
+
+
+def test_concatenate_merges_shared_nodes_and_names():
+    skin = ShellMesh(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]], float),
+                     [[0, 1, 4, 3], [1, 2, 5, 4]], [0, 0], ["skin"])
+    rib = ShellMesh(np.array([[1, 0, 0], [1, 0, 1], [1, 1, 1], [1, 1, 0]], float),
+                    [[0, 1, 2, 3]], [0], ["rib"], feature_edges=[[0, 3]], feature_edge_ids=[0])
+    m = concatenate([skin, rib])
+    assert m.n_points == 8
+    assert m.component_names == ["skin", "rib"]
+    assert m.component.tolist() == [0, 0, 1]
+    assert m.nonmanifold_edges().tolist() == [[1, 4]]
+    assert m.feature_edges.tolist() == [[1, 4]] and m.feature_edge_ids.tolist() == [1]
+    assert m.check().ok
+    # same names in a different order map to the same ids
+    m2 = concatenate([rib, skin])
+    assert m2.component_names == ["rib", "skin"]
+    assert m2.component.tolist() == [0, 1, 1]
+
+
+def test_merge_close_points_deterministic():
+    p = np.array([[0, 0, 0], [1, 0, 0], [1e-12, 0, 0], [1, 1e-12, 0], [2, 0, 0]], float)
+    newp, o2n = merge_close_points(p, 1e-9)
+    assert o2n.tolist() == [0, 1, 0, 1, 2]
+    assert np.array_equal(newp, p[[0, 1, 4]])
+
+
+def test_compact_drops_unreferenced():
+    p = np.array([[9, 9, 9], [0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    m, o2n = ShellMesh(p, [[1, 2, 3]], fixed_vertices=[0, 2]).compact()
+    assert m.n_points == 3 and m.faces[0, :3].tolist() == [0, 1, 2]
+    assert m.fixed_vertices.tolist() == [1] and o2n[0] == -1
+
+
+def test_triangles_cover_quads():
+    m = unit_cube()
+    tris, parent = m.triangles()
+    assert len(tris) == 12
+    assert np.bincount(parent).tolist() == [2] * 6
+    a = 0.5 * np.linalg.norm(np.cross(m.points[tris[:, 1]] - m.points[tris[:, 0]],
+                                      m.points[tris[:, 2]] - m.points[tris[:, 0]]), axis=1)
+    assert np.isclose(a.sum(), 6.0)
+
+
+def test_edge_topology_vectorised_large():
+    # a 300x300 quad grid: 90,000 faces; interior edges valence 2, boundary 1
+    n = 301
+    x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float), indexing="ij")
+    p = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], 1)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    v = (i * n + j).ravel()
+    f = np.stack([v, v + n, v + n + 1, v + 1], 1)
+    t = edge_topology(f)
+    assert len(t.edges) == 2 * n * (n - 1)
+    assert (t.valence == 1).sum() == 4 * (n - 1)
+    assert ShellMesh(p, f).n_bodies() == 1
