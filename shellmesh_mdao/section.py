@@ -79,9 +79,12 @@ class SectionArc:
         return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
 
-def plane_section(points: np.ndarray, tris: np.ndarray, plane: Plane) -> PlaneSection:
-    """Segments in which ``plane`` cuts each triangle (vectorised over all triangles)."""
+def plane_section(points: np.ndarray, tris: np.ndarray, plane: Plane, zero_vertices=None) -> PlaneSection:
+    """Segments in which ``plane`` cuts each triangle (vectorised over all triangles).
+    ``zero_vertices``: vertex indices taken to lie exactly on the plane."""
     d = plane.side(points)
+    if zero_vertices is not None and len(zero_vertices):
+        d[np.asarray(zero_vertices, np.int64)] = 0.0
     pos = d >= 0.0
     s = pos[tris]
     crossed = np.flatnonzero(s.any(1) & ~s.all(1))
@@ -106,12 +109,41 @@ def plane_section(points: np.ndarray, tris: np.ndarray, plane: Plane) -> PlaneSe
     return PlaneSection(nodes, node_edge, links, crossed)
 
 
-def _clip_links(p0: np.ndarray, p1: np.ndarray, bounds) -> tuple[np.ndarray, np.ndarray]:
-    """Parameter interval [t0, t1] of each segment p0->p1 inside all half-spaces side >= 0."""
+def _cut_at_vertices(sec: PlaneSection, stops: np.ndarray, points: np.ndarray) -> PlaneSection:
+    """Cut the section graph at mesh vertices lying on the plane: nodes sitting on a stop
+    vertex are replaced by a fresh terminal node per link; zero-length links between two
+    nodes of the same stop vertex are dropped."""
+    is_stop = np.zeros(len(points), bool)
+    is_stop[stops] = True
+    ne = sec.node_edge
+    # a node sits on a stop vertex when its edge has the stop vertex and the crossing is at it
+    at = np.full(len(ne), -1, np.int64)
+    for col in (0, 1):
+        v = ne[:, col]
+        on = is_stop[v] & (np.linalg.norm(sec.nodes - points[v], axis=1) <= 1e-12 * (
+            1.0 + np.linalg.norm(points[ne[:, 0]] - points[ne[:, 1]], axis=1)))
+        at = np.where(on & (at < 0), v, at)
+    a, b = sec.links[:, 0], sec.links[:, 1]
+    va, vb = at[a], at[b]
+    keep = ~((va >= 0) & (va == vb))
+    a, b, va, vb, tri = a[keep], b[keep], va[keep], vb[keep], sec.link_tri[keep]
+    k = len(sec.nodes)
+    na = np.where(va >= 0, k + 2 * np.arange(len(a)), a)
+    nb = np.where(vb >= 0, k + 2 * np.arange(len(a)) + 1, b)
+    nodes = np.zeros((k + 2 * len(a), 3))
+    nodes[:k] = sec.nodes
+    nodes[na[va >= 0]] = points[va[va >= 0]]
+    nodes[nb[vb >= 0]] = points[vb[vb >= 0]]
+    node_edge = np.vstack([ne, np.repeat(np.stack([np.maximum(va, vb), np.maximum(va, vb)], 1), 2, axis=0)])
+    return PlaneSection(nodes, node_edge, np.stack([na, nb], 1), tri)
+
+
+def _clip_links(p0: np.ndarray, p1: np.ndarray, bounds, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Parameter interval [t0, t1] of each segment p0->p1 inside all half-spaces side >= -tol."""
     t0 = np.zeros(len(p0))
     t1 = np.ones(len(p0))
     for bnd in bounds:
-        g0, g1 = bnd.side(p0), bnd.side(p1)
+        g0, g1 = bnd.side(p0) + tol, bnd.side(p1) + tol
         den = g0 - g1
         with np.errstate(divide="ignore", invalid="ignore"):
             tc = np.where(den != 0, g0 / den, 0.0)
@@ -126,23 +158,35 @@ def _clip_links(p0: np.ndarray, p1: np.ndarray, bounds) -> tuple[np.ndarray, np.
 
 
 def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), seed=None,
-                seed_tri: int | None = None, name: str = "member", merge_tol: float | None = None) -> SectionArc:
+                seed_tri: int | None = None, name: str = "member", merge_tol: float | None = None,
+                zero_vertices=None, bound_tol: float = 0.0, stop_vertices=None) -> SectionArc:
     """The connected arc of ``plane ∩ surface`` inside every half-space of ``bounds`` that
     passes through ``seed`` (a point on the surface and the plane, e.g. a ray-cast hit).
 
     ``seed_tri`` is the surface triangle that contains the seed (from the ray cast); the
     arc through the link nearest to the seed is taken. Consecutive arc points closer than
-    ``merge_tol`` (default 1e-12 of the arc's bounding-box diagonal) are merged. Raises :class:`ImprintError` (naming
+    ``merge_tol`` (default 1e-12 of the arc's bounding-box diagonal) are merged.
+    ``zero_vertices`` are taken to lie exactly on the plane; a point within ``bound_tol``
+    outside a bound counts as inside, and clipped pieces not longer than ``bound_tol`` are
+    dropped (so an arc ends exactly at a vertex placed on the bound). Raises :class:`ImprintError` (naming
     ``name``) when the plane misses the surface inside the bounds.
     """
-    sec = plane_section(points, tris, plane)
+    sec = plane_section(points, tris, plane, zero_vertices)
     if not len(sec.links):
         raise ImprintError(f"{name}: its plane does not cut the surface; check the member's position "
                            "(it must lie inside the aircraft)")
+    if stop_vertices is not None and len(stop_vertices):
+        sec = _cut_at_vertices(sec, np.asarray(stop_vertices, np.int64), points)
+        bounds = ()
     p0 = sec.nodes[sec.links[:, 0]]
     p1 = sec.nodes[sec.links[:, 1]]
-    t0, t1 = _clip_links(p0, p1, bounds)
-    keep = t1 > t0
+    t0, t1 = _clip_links(p0, p1, bounds, bound_tol)
+    if bound_tol > 0 and len(bounds):
+        # drop slivers of links that only touch a bound (zero-length links elsewhere stay)
+        clipped = (t0 > 0) | (t1 < 1)
+        keep = (t1 > t0) & ~(clipped & ((t1 - t0) * np.linalg.norm(p1 - p0, axis=1) <= bound_tol))
+    else:
+        keep = t1 > t0
     if not keep.any():
         raise ImprintError(f"{name}: its plane cuts the surface only outside the member's bounds; "
                            "check the layout's stations and chord fractions")

@@ -1,0 +1,122 @@
+"""Imprint of member planes into a triangle skin: exact chains, shared crossings, conformity."""
+import numpy as np
+import pytest
+import trimesh
+
+from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
+from shellmesh_mdao.imprint import ChainSpec, closest_on_polyline, imprint_chains
+from shellmesh_mdao.section import Plane
+
+
+def wing_chains(mesh, lay, etas, spars):
+    """ChainSpecs of a wing box on a generated wing (the layout stage does this for users)."""
+    P, T = mesh.points, mesh.faces[:, :3]
+    tm = trimesh.Trimesh(P, T, process=False)
+    up = np.asarray(lay["up"])
+    rle, rte, tle, tte = (np.asarray(lay[k]) for k in ("root_le", "root_te", "tip_le", "tip_te"))
+    span = (tle + tte) / 2 - (rle + rte) / 2
+    span -= (span @ up) * up
+
+    def hit(o, d):
+        loc, _, it = tm.ray.intersects_location([o], [d], multiple_hits=False)
+        return loc[0], int(it[0])
+
+    def spar(c, inward):
+        a, b = rle + c * (rte - rle), tle + c * (tte - tle)
+        n = np.cross(b - a, up)
+        return Plane.make(a, n if n @ inward > 0 else -n), a, b
+
+    front, _, _ = spar(spars[0], rte - rle)
+    rear, _, _ = spar(spars[-1], rle - rte)
+    root = Plane.make(rle, span)
+    tip = Plane.make(tle, -span)
+    chains = []
+    for k, eta in enumerate(etas):
+        le, te = rle + eta * (tle - rle), rte + eta * (tte - rte)
+        mid = le + 0.5 * (spars[0] + spars[-1]) * (te - le)
+        for side, s in (("upper", 1), ("lower", -1)):
+            x, t = hit(mid, s * up)
+            chains.append(ChainSpec(f"wing/rib_{k}", side, Plane.make(le, span), (front, rear), x, t))
+    for j, c in enumerate(spars):
+        pl, a, b = spar(c, rte - rle)
+        for side, s in (("upper", 1), ("lower", -1)):
+            x, t = hit((a + b) / 2, s * up)
+            chains.append(ChainSpec(f"wing/spar_{j}", side, pl, (root, tip), x, t))
+    return chains
+
+
+@pytest.fixture(scope="module")
+def imprinted():
+    m = naca_wing(n_chord=30, n_span=25)
+    lay = naca_wing_layout()["wings"][0]
+    chains = wing_chains(m, lay, np.linspace(0, 1, 8), [0.15, 0.65])
+    out, res = imprint_chains(m, m.points, m.faces[:, :3], chains)
+    return m, chains, out, res
+
+
+def test_imprinted_skin_is_valid_and_closed(imprinted):
+    m, chains, out, res = imprinted
+    assert out.is_closed()
+    assert out.check().ok, out.check().problems()
+    assert out.n_bodies() == 1
+    # area preserved: cutting only subdivides triangles (moved chain vertices stay on the surface)
+    assert np.isclose(out.face_areas().sum(), m.face_areas().sum(), rtol=2e-3)
+
+
+def test_chain_vertices_exact_on_plane_and_input(imprinted):
+    m, chains, out, res = imprinted
+    tm = trimesh.Trimesh(m.points, m.faces[:, :3], process=False)
+    diag = m.diagonal
+    for spec, r in zip(chains, res):
+        x = out.points[r.vertices]
+        assert np.abs(spec.plane.side(x)).max() < 1e-9 * diag, spec.member
+        assert tm.nearest.on_surface(x)[1].max() < 1e-9 * diag, spec.member
+    # every other skin vertex is still on the input surface
+    assert tm.nearest.on_surface(out.points)[1].max() < 1e-9 * diag
+
+
+def test_chains_are_mesh_edges_and_share_crossings(imprinted):
+    m, chains, out, res = imprinted
+    topo = out.topology()
+    for spec, r in zip(chains, res):
+        e = np.stack([r.vertices[:-1], r.vertices[1:]], 1)
+        assert (topo.edge_ids(e) >= 0).all(), spec.member
+        # and feature edges tagged with the member's component id
+        cid = out.component_names.index(spec.member)
+        fe = {tuple(r): i for r, i in zip(out.feature_edges.tolist(), out.feature_edge_ids.tolist())}
+        assert all(fe.get(tuple(sorted(p))) == cid for p in e.tolist()), spec.member
+    by = {(r.member, r.side): r.vertices for r in res}
+    for side in ("upper", "lower"):
+        for k in range(8):
+            rib = by[(f"wing/rib_{k}", side)]
+            for j in range(2):
+                spar = by[(f"wing/spar_{j}", side)]
+                shared = np.intersect1d(rib, spar)
+                assert len(shared) == 1, (k, j, side)
+            # rib chains run from the front spar to the rear spar: ends are the crossings
+            assert set(rib[[0, -1]]) == {np.intersect1d(rib, by[(f"wing/spar_{j}", side)])[0] for j in range(2)}
+        # spar chains run root rib to tip rib
+        for j in range(2):
+            spar = by[(f"wing/spar_{j}", side)]
+            ends = {int(np.intersect1d(spar, by[(f"wing/rib_{k}", side)])[0]) for k in (0, 7)}
+            assert set(spar[[0, -1]].tolist()) == ends
+
+
+def test_imprint_deterministic(imprinted):
+    m, chains, out, res = imprinted
+    out2, _ = imprint_chains(m, m.points, m.faces[:, :3], chains)
+    assert np.array_equal(out.points, out2.points) and np.array_equal(out.faces, out2.faces)
+    assert np.array_equal(out.feature_edges, out2.feature_edges)
+
+
+def test_closest_on_polyline_brute_force():
+    rng = np.random.default_rng(0)
+    poly = np.cumsum(rng.normal(size=(50, 3)), axis=0)
+    q = rng.normal(size=(200, 3)) * 5
+    x = closest_on_polyline(q, poly)
+    a, b = poly[:-1], poly[1:]
+    ab = b - a
+    t = np.clip(np.einsum("qij,ij->qi", q[:, None] - a[None], ab) / (ab * ab).sum(1), 0, 1)
+    cand = a[None] + t[..., None] * ab[None]
+    d = np.linalg.norm(cand - q[:, None], axis=2)
+    assert np.allclose(np.linalg.norm(x - q, axis=1), d.min(1), atol=1e-12)
