@@ -1,0 +1,309 @@
+"""Merging MIP (paper eq. 4-5): known merges, guards (feature, non-convex, fold,
+non-manifold, components, orientation), exactness of the pre-solve reduction against
+brute force, time-limit behaviour, determinism and corpus runs with quality checks."""
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from shellmesh_mdao.mesh import ShellMesh
+from shellmesh_mdao.merge import _safe_reduction, merge_candidates, merge_triangles, quad_energy
+
+try:
+    from shellmesh_mdao.quality import scaled_jacobian
+except ImportError:  # pragma: no cover - quality.py is written by another helper
+    def scaled_jacobian(points, faces):
+        Q = points[np.where(faces >= 0, faces, faces[:, :1])]
+        nq = np.cross(Q[:, 2] - Q[:, 0], Q[:, 3] - Q[:, 1])
+        nq /= np.linalg.norm(nq, axis=1, keepdims=True)
+        nx, pv = np.roll(Q, -1, 1) - Q, np.roll(Q, 1, 1) - Q
+        return ((np.cross(nx, pv) * nq[:, None]).sum(2)
+                / (np.linalg.norm(nx, axis=2) * np.linalg.norm(pv, axis=2))).min(1)
+
+
+def tri(a, b, c):
+    return [a, b, c, -1]
+
+
+def normals(mesh):
+    return mesh.face_normals()
+
+
+# ------------------------------------------------------------------ known merges
+def test_two_right_isosceles_triangles_make_a_square():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    mesh = ShellMesh(pts, [tri(0, 1, 2), tri(0, 2, 3)])
+    out, res = merge_triangles(mesh)
+    assert res.status == "Optimal" and res.n_merged == 1 and res.mip_gap == 0
+    assert out.n_quads == 1 and out.n_tris == 0
+    q = out.faces[0]
+    assert sorted(q.tolist()) == [0, 1, 2, 3]
+    # same orientation as the triangles (normal +z), a proper square (all sides 1)
+    assert np.allclose(normals(out)[0], [0, 0, 1])
+    assert np.allclose(np.linalg.norm(pts[np.roll(q, -1)] - pts[q], axis=1), 1.0)
+    assert res.merged_edges.tolist() == [[0, 2]]
+    # weight = e(square) - 2 e(right isosceles) < 0, and the square's energy is 0
+    assert quad_energy(pts[None, [0, 1, 2, 3]])[0] == pytest.approx(0, abs=1e-12)
+    assert res.objective < 0
+    out.validate()
+
+
+def _tri_grid(nx, ny, dx=1.0, dy=1.0, alternate=True):
+    x, y = np.meshgrid(np.arange(nx + 1) * dx, np.arange(ny + 1) * dy, indexing="ij")
+    pts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
+    idx = np.arange(len(pts)).reshape(nx + 1, ny + 1)
+    faces = []
+    for i in range(nx):          # tiny test grids only
+        for j in range(ny):
+            a, b, c, d = idx[i, j], idx[i + 1, j], idx[i + 1, j + 1], idx[i, j + 1]
+            if alternate and (i + j) % 2:
+                faces += [tri(a, b, d), tri(b, c, d)]
+            else:
+                faces += [tri(a, b, c), tri(a, c, d)]
+    return pts, np.array(faces)
+
+
+@pytest.mark.parametrize("alternate", [False, True])
+def test_structured_grid_merges_into_all_squares(alternate):
+    pts, f = _tri_grid(6, 5, alternate=alternate)
+    mesh = ShellMesh(pts, f)
+    out, res = merge_triangles(mesh)
+    assert res.status == "Optimal"
+    assert out.n_tris == 0 and out.n_quads == 30 and res.quad_fraction == 1.0
+    assert np.allclose(out.face_areas(), 1.0)
+    assert np.allclose(normals(out), [0, 0, 1])
+    assert np.allclose(scaled_jacobian(out.points, out.faces), 1.0)
+    out.validate()
+
+
+def test_strip_of_thin_triangles_merges_into_rectangles():
+    # a 1 x 8 strip of 3:1 cells cut by diagonals: all become 3 x 1 rectangles
+    pts, f = _tri_grid(8, 1, dx=1.0, dy=3.0)
+    out, res = merge_triangles(ShellMesh(pts, f))
+    assert out.n_tris == 0 and out.n_quads == 8
+    assert np.allclose(out.face_areas(), 3.0)
+
+
+# ------------------------------------------------------------------ guards
+def test_feature_edge_is_never_merged():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    mesh = ShellMesh(pts, [tri(0, 1, 2), tri(0, 2, 3)], feature_edges=[[2, 0]])
+    out, res = merge_triangles(mesh)
+    assert res.n_merged == 0 and out.n_tris == 2 and res.status == "No candidates"
+    # explicit fixed_edges replaces the default
+    out2, res2 = merge_triangles(mesh, fixed_edges=np.zeros((0, 2)))
+    assert res2.n_merged == 1
+
+
+def test_nonconvex_pair_is_never_merged():
+    # quad (b, c, a, d) = (2,0),(1,1),(0,0),(3,-0.5) is reflex at b
+    pts = np.array([[0, 0, 0], [2, 0, 0], [1, 1, 0], [3, -0.5, 0]], float)
+    mesh = ShellMesh(pts, [tri(0, 1, 2), tri(1, 0, 3)])
+    cand = merge_candidates(mesh)
+    assert len(cand["edge"]) == 1 and not cand["allowed"][0]
+    assert cand["scaled_jacobian"][0] < 0
+    # even with every optional guard relaxed, a non-convex quad is refused
+    out, res = merge_triangles(mesh, min_angle=0, max_angle=180, max_dihedral=180, min_jacobian=-1,
+                               c1=0, c2=0, c3=0)
+    assert res.n_merged == 0 and out.n_tris == 2
+
+
+def test_angle_guard_rejects_near_degenerate_quads():
+    # a convex but nearly triangular quad (corner of ~171 deg at node 1)
+    pts = np.array([[0, 0, 0], [1, -0.08, 0], [2, 0, 0], [1, 1, 0]], float)
+    mesh = ShellMesh(pts, [tri(0, 1, 3), tri(1, 2, 3)])
+    cand = merge_candidates(mesh)
+    assert cand["angles"].max() > 160 and not cand["allowed"][0]
+    assert 0.1 < cand["scaled_jacobian"][0] < 0.3            # convex, sin(171 deg)
+    assert merge_triangles(mesh)[1].n_merged == 0
+    assert merge_triangles(mesh, max_angle=175, min_jacobian=0.1, c2=0)[1].n_merged == 1
+
+
+def test_folded_pair_is_never_merged():
+    # two right triangles folded 90 degrees about their shared hypotenuse-free edge
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 0, 1], [1, 0, 1]], float)
+    # (0,1,2) in z=0 and (1,0,3)+(1,3,4) in y=0; merge candidates across edge (0,1)
+    mesh = ShellMesh(pts, [tri(0, 1, 2), tri(1, 0, 3), tri(1, 3, 4)])
+    cand = merge_candidates(mesh)
+    fold = (cand["f0"] == 0) & (cand["f1"] == 1)
+    assert fold.any() and not cand["allowed"][fold][0] and cand["dihedral"][fold][0] == pytest.approx(90)
+    out, res = merge_triangles(mesh)
+    assert not ((res.merged_edges == [0, 1]).all(1)).any()
+
+
+def test_nonmanifold_edge_with_three_faces_is_never_merged():
+    # three triangles on one edge (skin both sides + a rib), same component, not fixed
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1]], float)
+    mesh = ShellMesh(pts, [tri(0, 1, 2), tri(1, 0, 3), tri(0, 1, 4)])
+    assert mesh.topology().valence.max() == 3
+    cand = merge_candidates(mesh, fixed_edges=np.zeros((0, 2)))
+    assert len(cand["edge"]) == 0
+    out, res = merge_triangles(mesh, fixed_edges=np.zeros((0, 2)))
+    assert res.n_merged == 0 and out.n_faces == 3
+
+
+def test_different_components_and_inconsistent_orientation_are_not_merged():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    two_comp = ShellMesh(pts, [tri(0, 1, 2), tri(0, 2, 3)], [0, 1], ["skin", "rib"])
+    assert merge_triangles(two_comp)[1].n_merged == 0
+    # second triangle flipped: both traverse the shared edge 2->0 the same way
+    flipped = ShellMesh(pts, [tri(0, 1, 2), tri(3, 2, 0)])
+    topo = flipped.topology()
+    e = topo.edge_ids([[0, 2]])[0]
+    h = np.flatnonzero(topo.he_edge == e)
+    assert len(set(topo.he_from[h].tolist())) == 1                # same direction
+    assert merge_triangles(flipped)[1].n_merged == 0
+    assert len(merge_candidates(flipped)["edge"]) == 0
+
+
+def test_components_and_feature_data_preserved():
+    pts, f = _tri_grid(4, 2)
+    comp = np.repeat([0, 1], len(f) // 2)
+    fe = [[0, 1], [1, 2]]
+    mesh = ShellMesh(pts, f, comp, ["a", "b"], fixed_vertices=[0, 1, 2], feature_edges=fe,
+                     feature_edge_ids=[3, 3])
+    out, res = merge_triangles(mesh)
+    assert out.component_names == ["a", "b"]
+    assert np.array_equal(out.points, mesh.points)
+    assert out.feature_edges.tolist() == fe and out.fixed_vertices.tolist() == [0, 1, 2]
+    # every quad comes from two triangles of its own component: areas of a component kept
+    for c in (0, 1):
+        assert out.face_areas()[out.component == c].sum() == pytest.approx(
+            mesh.face_areas()[mesh.component == c].sum())
+
+
+# ------------------------------------------------------------------ optimality
+def _brute_force(w, f0, f1):
+    """Minimum total weight of a matching (edges f0-f1), by enumerating every subset."""
+    k = len(w)
+    if k == 0:
+        return 0.0
+    subsets = ((np.arange(2 ** k)[:, None] >> np.arange(k)) & 1).astype(float)
+    n = int(max(f0.max(), f1.max())) + 1
+    inc = np.zeros((k, n))
+    inc[np.arange(k), f0] += 1
+    inc[np.arange(k), f1] += 1
+    ok = ((subsets @ inc) <= 1).all(1)
+    return float(min(0.0, (subsets[ok] @ w).min()))
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_safe_reduction_is_exact_on_random_graphs(seed):
+    # random graph of "triangles" (degree <= 3 like a mesh's dual) with random negative
+    # weights: the edges fixed by the reduction plus the best matching of the rest must
+    # reach the brute-force optimum
+    rng = np.random.default_rng(seed)
+    n = 10
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)])
+    pairs = pairs[rng.permutation(len(pairs))]
+    deg = np.zeros(n, int)
+    keep = []
+    for i, j in pairs:
+        if deg[i] < 3 and deg[j] < 3 and len(keep) < 14:
+            keep.append((i, j))
+            deg[i] += 1
+            deg[j] += 1
+    e = np.array(keep)
+    w = -rng.choice([0.5, 1.0, 1.5, 2.0, 3.0], len(e)) * rng.uniform(0.9, 1.1, len(e)) ** (seed % 2)
+    f0, f1 = e[:, 0], e[:, 1]
+    taken, rest = _safe_reduction(f0, f1, w, n)
+    used = np.concatenate([f0[taken], f1[taken]])
+    assert len(np.unique(used)) == len(used)
+    assert not (rest & taken).any()
+    assert not (rest & (np.isin(f0, used) | np.isin(f1, used))).any()
+    total = float(w[taken].sum()) + _brute_force(w[rest], f0[rest], f1[rest])
+    assert total == pytest.approx(_brute_force(w, f0, f1), abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_optimum_matches_brute_force(seed):
+    # jittered 3x2 grid: ~13 candidate edges; the reduction + MIP must find the optimum
+    rng = np.random.default_rng(seed)
+    pts, f = _tri_grid(3, 2, alternate=bool(seed % 2))
+    pts[:, :2] += rng.uniform(-0.2, 0.2, (len(pts), 2))
+    mesh = ShellMesh(pts, f)
+    cand = merge_candidates(mesh, min_angle=0, max_angle=180, max_dihedral=180, min_jacobian=0)
+    use = cand["allowed"] & (cand["weight"] < 0)
+    best = _brute_force(cand["weight"][use], cand["f0"][use], cand["f1"][use])
+    out, res = merge_triangles(mesh, min_angle=0, max_angle=180, max_dihedral=180, min_jacobian=0,
+                               mip_gap=0)
+    assert res.objective == pytest.approx(best, abs=1e-9)
+
+
+def test_tiny_time_limit_still_returns_a_valid_matching(geometry_dir):
+    mesh = _corpus_mesh(geometry_dir, "swept_wing")
+    out, res = merge_triangles(mesh, time_limit=1e-3)
+    assert res.n_merged > 0 and isinstance(res.status, str)
+    out.validate()
+    assert out.n_faces == mesh.n_faces - res.n_merged
+
+
+# ------------------------------------------------------------------ corpus
+def _corpus_mesh(geometry_dir, name, feature_deg=30.0):
+    tm = trimesh.load(geometry_dir / f"{name}.stl", process=False)
+    tm.merge_vertices()
+    fe = tm.face_adjacency_edges[np.degrees(tm.face_adjacency_angles) > feature_deg]
+    return ShellMesh(tm.vertices, tm.faces, feature_edges=fe)
+
+
+def _check_merge(mesh, out, res):
+    assert res.status == "Optimal" or res.mip_gap <= 0.01, (res.status, res.mip_gap)
+    assert out.n_faces == mesh.n_faces - res.n_merged
+    sj = scaled_jacobian(out.points, out.faces[out.is_quad])
+    assert (sj > 0).all() and sj.min() > 0.29          # guard min_jacobian = 0.3
+    # feature edges are still mesh edges; nothing else changed
+    assert (out.topology().edge_ids(out.feature_edges) >= 0).all()
+    assert np.array_equal(out.points, mesh.points)
+    c = out.check()
+    assert len(c.inconsistent_edges) == 0 and len(c.hanging_nodes) == 0
+    assert len(c.degenerate_faces) == len(mesh.check().degenerate_faces)
+    return sj
+
+
+def test_corpus_straight_wing_merge(geometry_dir):
+    mesh = _corpus_mesh(geometry_dir, "straight_wing")
+    t = time.perf_counter()
+    out, res = merge_triangles(mesh)
+    dt = time.perf_counter() - t
+    sj = _check_merge(mesh, out, res)
+    print(f"\nstraight_wing merge: {mesh.n_faces} tris -> {out.n_quads} quads + {out.n_tris} tris, "
+          f"quad fraction {res.quad_fraction:.3f}, status {res.status}, gap {res.mip_gap:.2g}, "
+          f"min SJ {sj.min():.3f}, {dt:.2f} s")
+    assert res.quad_fraction > 0.95          # a panel mesh: nearly all pairs are panels
+    out2, res2 = merge_triangles(mesh)
+    assert np.array_equal(out.faces, out2.faces) and res.objective == res2.objective
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["swept_wing", "bwb", "cessna210"])
+def test_corpus_merge_all(geometry_dir, name):
+    mesh = _corpus_mesh(geometry_dir, name)
+    out, res = merge_triangles(mesh)
+    sj = _check_merge(mesh, out, res)
+    print(f"\n{name} merge: {mesh.n_faces} tris, quad fraction {res.quad_fraction:.3f}, {res.status}, "
+          f"gap {res.mip_gap:.2g}, min SJ {sj.min():.3f}, {res.seconds:.2f} s (HiGHS {res.solve_seconds:.2f} s)")
+
+
+@pytest.mark.slow
+def test_merge_timing_100k(geometry_dir):
+    tm = trimesh.load(geometry_dir / "cessna210.stl", process=False)
+    tm.merge_vertices()
+    tm = tm.subdivide()
+    fe = tm.face_adjacency_edges[np.degrees(tm.face_adjacency_angles) > 30]
+    mesh = ShellMesh(tm.vertices, tm.faces, feature_edges=fe)
+    out, res = merge_triangles(mesh)
+    sj = _check_merge(mesh, out, res)
+    print(f"\ncessna210 x4 merge: {mesh.n_faces} tris, quad fraction {res.quad_fraction:.3f}, {res.status}, "
+          f"gap {res.mip_gap:.2g}, {res.seconds:.2f} s (HiGHS {res.solve_seconds:.2f} s, "
+          f"{res.n_candidates} candidates)")
+
+
+def test_existing_quads_untouched_and_empty_mesh():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]], float)
+    mesh = ShellMesh(pts, [[0, 1, 4, 3], tri(1, 2, 5), tri(1, 5, 4)])
+    out, res = merge_triangles(mesh)
+    assert out.faces.tolist() == [[0, 1, 4, 3], [1, 2, 5, 4]] and res.n_merged == 1
+    empty = ShellMesh(np.zeros((0, 3)), np.zeros((0, 4), int))
+    out, res = merge_triangles(empty)
+    assert out.n_faces == 0 and res.n_merged == 0

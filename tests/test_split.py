@@ -1,0 +1,343 @@
+"""Splitting LP (paper eq. 1-3): option tables against the paper's eq. 3 example, energy
+values, known optimal splits, edge agreement on non-manifold edges, fixed edges,
+projection callback, the MIP fallback, determinism and a corpus run."""
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from shellmesh_mdao.errors import ProjectionError
+from shellmesh_mdao.mesh import ShellMesh
+from shellmesh_mdao.merge import merge_triangles
+from shellmesh_mdao.split import (N_OPTIONS, build_split_lp, polygon_energy, split_energy, split_options,
+                                  split_polygons)
+
+SQ3 = np.sqrt(3.0)
+
+
+def signed_area_2d(P):
+    """Shoelace area of (k, 3 or 4, 2+) polygons (xy only)."""
+    x, y = P[..., 0], P[..., 1]
+    return 0.5 * (x * np.roll(y, -1, -1) - np.roll(x, -1, -1) * y).sum(-1)
+
+
+def assert_conforming(mesh):
+    c = mesh.check()
+    assert c.ok, c.problems()
+    assert len(c.hanging_nodes) == 0
+
+
+# ------------------------------------------------------------------ option tables
+def test_option_tables_reproduce_paper_eq3_example():
+    o = split_options()
+    # paper: triangle side (2,0) is split by options 2, 3, 5; quad side (1,2) by options 0, 2, 6
+    assert np.flatnonzero(o.splits[0, :, 2]).tolist() == [2, 3, 5]
+    assert np.flatnonzero(o.splits[1, :, 1]).tolist() == [0, 2, 6]
+    assert o.valid[0].tolist() == [True] * 7 + [False] * 4 and o.valid[1].all()
+    assert o.keep.tolist() == [6, 10]
+    # every option of every kind splits either nothing, one side, or two sides
+    nsplit = o.splits.sum(2)
+    assert nsplit[1].tolist() == [2, 2] + [1] * 8 + [0]
+    assert nsplit[0, :7].tolist() == [1, 1, 1, 2, 2, 2, 0]
+
+
+def test_paper_fig6_agreement_row():
+    # Fig. 6: triangle (1,2,3) and quad (0,1,3,4) sharing edge (1,3). With the triangle
+    # as face 0 and the quad as face 1, the agreement row is the first row of eq. 3.
+    pts = np.array([[0, 0, 0], [1, 0, 0], [2, 0.5, 0], [1, 1, 0], [0, 1, 0]], float)
+    mesh = ShellMesh(pts, [[1, 2, 3, -1], [0, 1, 3, 4]])
+    lp = build_split_lp(mesh, reduce=False)
+    assert lp.A.shape == (3, 2 * N_OPTIONS)
+    row = lp.A[2].toarray().ravel()
+    paper = [0, 0, 1, 1, 0, 1, 0, 0, 0, 0, 0, -1, 0, -1, 0, 0, 0, -1, 0, 0, 0, 0]
+    assert row.tolist() == paper
+    # choice rows: sum of the 11 options of each polygon = 1; padded triangle options ub 0
+    assert lp.A[0].toarray().ravel().tolist() == [1] * 11 + [0] * 11
+    assert lp.ub[7:11].tolist() == [0, 0, 0, 0] and lp.ub[11:].tolist() == [1] * 11
+
+
+@pytest.mark.parametrize("kind", [0, 1])
+def test_every_option_tiles_its_parent(kind):
+    # children of every valid option cover the parent exactly (areas sum up), keep its
+    # orientation (positive signed area) and use each split side's midpoint
+    o = split_options()
+    if kind == 1:
+        corners = np.array([[0, 0], [3, 0.2], [2.6, 2.1], [0.3, 1.7]])
+    else:
+        corners = np.array([[0, 0], [3, 0.4], [1.1, 2.2]])
+    nc = len(corners)
+    mids = np.array([0.5 * (corners[k] + corners[(k + 1) % nc]) for k in range(nc)])
+    local = np.full((9, 2), np.nan)
+    local[:nc] = corners
+    local[4:4 + nc] = mids
+    parent = signed_area_2d(corners[None])[0]
+    for opt in np.flatnonzero(o.valid[kind]):
+        total = 0.0
+        for ch in o.children[kind, opt]:
+            if ch[0] < 0:
+                continue
+            poly = local[ch[ch >= 0]]
+            assert not np.isnan(poly).any(), (kind, opt)
+            a = signed_area_2d(poly[None])[0]
+            assert a > 0, (kind, opt)
+            total += a
+        assert total == pytest.approx(parent, rel=1e-12), (kind, opt)
+        used_mids = {int(v) - 4 for v in o.children[kind, opt].ravel() if 4 <= v < 8}
+        assert used_mids == set(np.flatnonzero(o.splits[kind, opt]).tolist())
+
+
+# ------------------------------------------------------------------ energy
+def test_energy_values():
+    sq = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float)
+    eq = np.array([[[0, 0, 0], [1, 0, 0], [0.5, SQ3 / 2, 0], [0, 0, 0]]], float)
+    assert polygon_energy(sq, [False])[0] == pytest.approx(0, abs=1e-12)
+    assert polygon_energy(eq, [True])[0] == pytest.approx(0, abs=1e-12)
+    # 2:1 rectangle: sides 2,1,2,1, l_avg 1.5 -> 4 * (1/3)^2 ; angles exact
+    rect = np.array([[[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]]], float)
+    assert polygon_energy(rect, [False], c1=1, c2=5)[0] == pytest.approx(4 / 9)
+    # right isosceles triangle: angle term (90/60-1)^2 + 2 (45/60-1)^2 = 0.375
+    rt = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 0]]], float)
+    lav = (2 + np.sqrt(2)) / 3
+    exp_len = 2 * (1 / lav - 1) ** 2 + (np.sqrt(2) / lav - 1) ** 2
+    assert polygon_energy(rt, [True], c1=2, c2=3)[0] == pytest.approx(2 * exp_len + 3 * 0.375)
+    # eq. 2 read literally is the same constant for any planar polygon: why the
+    # deviation form is used
+    P = np.vstack([sq, rect, np.array([[[0, 0, 0], [5, 0, 0], [4, 1, 0], [0, 3, 0]]], float)])
+    assert np.allclose(polygon_energy(P, [False] * 3, form="literal"), 8.0)
+    T = np.vstack([eq, rt])
+    assert np.allclose(polygon_energy(T, [True] * 2, form="literal"), 6.0)
+    # degenerate polygon: large energy, no NaN
+    deg = np.array([[[0, 0, 0], [0, 0, 0], [1, 1, 0], [0, 1, 0]]], float)
+    assert polygon_energy(deg, [False])[0] >= 1e3
+
+
+def test_split_energy_is_sum_of_children():
+    pts = np.array([[0, 0, 0], [4, 0, 0], [4, 1, 0], [0, 1, 0]], float)
+    W = split_energy(pts, np.array([[0, 1, 2, 3]]))
+    # option 1 (mid-mid of the long sides) -> two 2x1 rectangles, 2 * 4/9
+    assert W[0, 1] == pytest.approx(8 / 9)
+    assert W[0, 10] == pytest.approx(4 * 0.36)                 # 4:1 rectangle: 4 (1.6-1)^2
+    assert W[0].argmin() == 1
+
+
+# ------------------------------------------------------------------ known optima
+def _grid(nx, ny, dx, dy, tri=False):
+    x, y = np.meshgrid(np.arange(nx + 1) * dx, np.arange(ny + 1) * dy, indexing="ij")
+    pts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
+    idx = np.arange(pts.shape[0]).reshape(nx + 1, ny + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    if tri:
+        f = np.vstack([np.stack([a, b, c, -np.ones_like(a)], 1), np.stack([a, c, d, -np.ones_like(a)], 1)])
+    else:
+        f = np.stack([a, b, c, d], 1)
+    return pts, f
+
+
+@pytest.mark.parametrize("long_x", [True, False])
+def test_long_thin_quad_splits_its_long_edges(long_x):
+    pts = np.array([[0, 0, 0], [4, 0, 0], [4, 1, 0], [0, 1, 0]], float)
+    if not long_x:
+        pts = np.array([[0, 0, 0], [1, 0, 0], [1, 4, 0], [0, 4, 0]], float)
+    mesh = ShellMesh(pts, [[0, 1, 2, 3]])
+    out, res = split_polygons(mesh)
+    assert res.status == "Optimal" and res.is_integral and not res.used_mip
+    assert res.choice.tolist() == [1 if long_x else 0]
+    assert out.n_quads == 2 and out.n_tris == 0
+    # the two new nodes are the midpoints of the long edges
+    new = out.points[res.new_nodes]
+    long_mids = [[2, 0, 0], [2, 1, 0]] if long_x else [[1, 2, 0], [0, 2, 0]]
+    assert sorted(map(tuple, new.tolist())) == sorted(map(tuple, long_mids))
+    assert np.allclose(out.face_areas(), 2.0)
+    assert res.objective == pytest.approx(8 / 9)
+
+
+def test_square_and_equilateral_meshes_are_kept():
+    pts, f = _grid(3, 3, 1.0, 1.0)
+    out, res = split_polygons(ShellMesh(pts, f))
+    assert res.n_split_edges == 0 and np.array_equal(out.faces, f)
+    assert res.option_counts[1, 10] == 9
+
+
+def test_stack_of_thin_quads_splits_together_and_conforms():
+    # 3 columns x 5 rows of 4:1 quads: every quad wants its long sides split; the shared
+    # long sides force whole columns to agree; result conforming, no hanging node
+    pts, f = _grid(3, 5, 4.0, 1.0)
+    mesh = ShellMesh(pts, f)
+    out, res = split_polygons(mesh)
+    assert res.status == "Optimal"
+    assert out.n_faces == 2 * mesh.n_faces and out.n_tris == 0
+    assert_conforming(out)
+    assert out.face_areas().sum() == pytest.approx(mesh.face_areas().sum())
+    assert np.allclose(out.face_areas(), 2.0)
+    # agreement: every split edge is split in all its faces -> every edge of the output
+    # has its two end nodes as face corners on both sides (checked by conformity) and
+    # the number of new nodes equals the number of long edges (3 x 6)
+    assert res.n_split_edges == 18
+
+
+def test_mixed_tri_quad_agreement_no_hanging_nodes():
+    # a thin quad next to a triangle on its long side: any split of the shared edge must
+    # be taken by the triangle too
+    pts = np.array([[0, 0, 0], [4, 0, 0], [4, 1, 0], [0, 1, 0], [2, 2.5, 0]], float)
+    mesh = ShellMesh(pts, [[0, 1, 2, 3], [3, 2, 4, -1]])
+    out, res = split_polygons(mesh)
+    assert res.choice[0] == 1          # quad splits its long sides
+    # the triangle's side 0 is the shared edge (3,2): it must take an option splitting it
+    assert split_options().splits[0, res.choice[1], 0]
+    assert res.choice[1] == 0          # here: from the apex, two triangles
+    assert_conforming(out)
+    assert out.face_areas().sum() == pytest.approx(mesh.face_areas().sum())
+
+
+def test_component_ids_carried_to_children():
+    pts, f = _grid(2, 3, 4.0, 1.0)
+    comp = np.array([0, 0, 0, 1, 1, 1])
+    mesh = ShellMesh(pts, f, comp, ["a", "b"])
+    out, res = split_polygons(mesh)
+    assert np.array_equal(out.component, comp[res.parent_face])
+    assert out.component_names == ["a", "b"]
+    assert res.n_split_edges > 0
+
+
+# ------------------------------------------------------------------ fixed / non-manifold
+def test_fixed_edge_is_never_split():
+    pts = np.array([[0, 0, 0], [4, 0, 0], [4, 1, 0], [0, 1, 0]], float)
+    mesh = ShellMesh(pts, [[0, 1, 2, 3]], feature_edges=[[0, 1]], fixed_vertices=[0, 1])
+    out, res = split_polygons(mesh)
+    assert not (res.parent_edges == [0, 1]).all(1).any()
+    assert out.feature_edges.tolist() == [[0, 1]]
+    assert out.fixed_vertices.tolist() == [0, 1]
+    # the two options splitting side 0 plus the mid-mid option 1 were bounded to 0
+    assert res.choice[0] not in (1, 5, 9)
+    assert_conforming(out)
+
+
+def _t_junction(feature: bool):
+    """Two skin 4x1 quads (z = 0) and a rib 4x1 quad (in z) sharing the edge (0,0,0)-(4,0,0)."""
+    pts = np.array([[0, 0, 0], [4, 0, 0],
+                    [4, 1, 0], [0, 1, 0],      # skin +y
+                    [4, -1, 0], [0, -1, 0],    # skin -y
+                    [4, 0, 1], [0, 0, 1]], float)  # rib
+    faces = [[0, 1, 2, 3], [1, 0, 5, 4], [0, 1, 6, 7]]
+    return ShellMesh(pts, faces, [0, 0, 1], ["skin", "rib"],
+                     feature_edges=[[0, 1]] if feature else None,
+                     feature_edge_ids=[1] if feature else None)
+
+
+def test_nonmanifold_feature_edge_never_split():
+    mesh = _t_junction(feature=True)
+    assert mesh.topology().valence.max() == 3
+    out, res = split_polygons(mesh)
+    assert not (np.sort(res.parent_edges, 1) == [0, 1]).all(1).any()
+    assert_conforming(out)
+    assert out.nonmanifold_edges().tolist() == [[0, 1]]
+
+
+def test_nonmanifold_edge_split_ties_all_three_faces():
+    # not fixed: all three 4:1 quads want the long edges split; the 3-face edge's
+    # midpoint must be shared by all three (one node, used by six faces)
+    mesh = _t_junction(feature=False)
+    out, res = split_polygons(mesh, fixed_edges=np.zeros((0, 2)))
+    assert res.choice.tolist() == [1, 1, 1]
+    k = np.flatnonzero((res.parent_edges == [0, 1]).all(1))
+    assert len(k) == 1
+    mid = res.new_nodes[k[0]]
+    assert np.allclose(out.points[mid], [2, 0, 0])
+    assert (out.faces == mid).any(1).sum() == 6
+    assert_conforming(out)
+    assert len(out.nonmanifold_edges()) == 2          # the two halves of the junction
+
+
+def test_split_fixed_keeps_chain_shared():
+    # beyond the paper: a fixed junction may be split by all its faces together; the
+    # feature edge becomes two halves with the same owner and the midpoint is fixed
+    mesh = _t_junction(feature=True)
+    out, res = split_polygons(mesh, split_fixed=True)
+    mid = res.new_nodes[np.flatnonzero((res.parent_edges == [0, 1]).all(1))[0]]
+    assert sorted(out.feature_edges.tolist()) == sorted([[0, mid], [1, mid]])
+    assert out.feature_edge_ids.tolist() == [1, 1]
+    assert mid in out.fixed_vertices
+    assert_conforming(out)
+
+
+# ------------------------------------------------------------------ projection
+def test_project_callback_moves_new_nodes_and_gets_parent_edges():
+    pts, f = _grid(2, 2, 4.0, 1.0)
+    mesh = ShellMesh(pts, f)
+    seen = {}
+
+    def project(p, parent):
+        seen["p"], seen["parent"] = p.copy(), parent.copy()
+        q = p.copy()
+        q[:, 2] = 0.25
+        return q
+
+    out, res = split_polygons(mesh, project=project)
+    assert len(seen["p"]) == res.n_split_edges > 0
+    assert np.allclose(seen["p"], 0.5 * (pts[seen["parent"][:, 0]] + pts[seen["parent"][:, 1]]))
+    assert np.array_equal(seen["parent"], res.parent_edges)
+    assert np.allclose(out.points[res.new_nodes, 2], 0.25)
+    assert np.array_equal(out.points[:mesh.n_points], pts)
+    with pytest.raises(ProjectionError, match="one finite 3-D point"):
+        split_polygons(mesh, project=lambda p, e: p[:1])
+
+
+# ------------------------------------------------------------------ MIP path, determinism
+def test_mip_path_gives_the_same_optimum():
+    pts, f = _grid(3, 4, 3.0, 1.0)
+    mesh = ShellMesh(pts, f)
+    out_lp, r_lp = split_polygons(mesh)
+    # an integrality tolerance below zero makes every LP answer "fractional"
+    out_mip, r_mip = split_polygons(mesh, integrality_tol=-1.0)
+    assert r_mip.used_mip and not r_lp.used_mip
+    assert r_mip.status == "Optimal"
+    assert r_mip.objective == pytest.approx(r_lp.objective)
+    assert_conforming(out_mip)
+
+
+def test_time_limit_keeps_every_polygon(geometry_dir):
+    mesh = _corpus_mesh(geometry_dir, "swept_wing")
+    out, res = split_polygons(mesh, time_limit=1e-6)
+    assert "Time limit" in res.status and "kept all polygons" in res.status
+    assert np.array_equal(out.faces, mesh.faces) and res.n_split_edges == 0
+
+
+def _corpus_mesh(geometry_dir, name, feature_deg=30.0):
+    tm = trimesh.load(geometry_dir / f"{name}.stl", process=False)
+    tm.merge_vertices()
+    fe = tm.face_adjacency_edges[np.degrees(tm.face_adjacency_angles) > feature_deg]
+    return ShellMesh(tm.vertices, tm.faces, feature_edges=fe)
+
+
+def test_corpus_merge_then_split_deterministic(geometry_dir):
+    mesh = _corpus_mesh(geometry_dir, "straight_wing")
+    q, _ = merge_triangles(mesh)
+    t = time.perf_counter()
+    a, ra = split_polygons(q)
+    dt = time.perf_counter() - t
+    b, rb = split_polygons(q)
+    print(f"\nstraight_wing split: {q.n_faces} polygons -> {a.n_faces}, status {ra.status}, "
+          f"objective {ra.objective:.2f}, integral LP {ra.is_integral}, {dt:.2f} s")
+    assert ra.status == "Optimal"
+    assert np.array_equal(a.faces, b.faces) and np.array_equal(a.points, b.points)
+    assert ra.objective == rb.objective
+    assert_conforming(a)
+    # feature edges untouched (all still mesh edges), objective no worse than keeping all
+    assert (a.topology().edge_ids(a.feature_edges) >= 0).all()
+    keep = split_energy(q.points, q.faces)[np.arange(q.n_faces), np.where(q.is_tri, 6, 10)].sum()
+    assert ra.objective <= keep + 1e-9
+
+
+@pytest.mark.slow
+def test_split_timing_100k(geometry_dir):
+    tm = trimesh.load(geometry_dir / "cessna210.stl", process=False)
+    tm.merge_vertices()
+    tm = tm.subdivide()
+    fe = tm.face_adjacency_edges[np.degrees(tm.face_adjacency_angles) > 30]
+    mesh = ShellMesh(tm.vertices, tm.faces, feature_edges=fe)
+    out, res = split_polygons(mesh)
+    print(f"\ncessna210 x4: {mesh.n_faces} triangles -> {out.n_faces}, {res.status}, "
+          f"LP {res.lp_seconds:.1f} s, MIP {res.mip_seconds:.1f} s, total {res.seconds:.1f} s")
+    assert res.status == "Optimal"
+    assert_conforming(out)
