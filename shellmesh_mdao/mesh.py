@@ -413,7 +413,9 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
     lo = np.minimum(he_from, he_to)
     hi = np.maximum(he_from, he_to)
     if len(lo):
-        edges, he_edge = np.unique(np.stack([lo, hi], 1), axis=0, return_inverse=True)
+        n = int(hi.max()) + 1
+        ukey, he_edge = np.unique(lo * n + hi, return_inverse=True)   # one int64 key: ~10x faster than axis=0
+        edges = np.stack([ukey // n, ukey % n], 1)
         he_edge = he_edge.reshape(-1)
     else:
         edges, he_edge = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
