@@ -1,0 +1,457 @@
+"""Projection of member curves onto the skin (paper Sec. IV.B, "projection of points").
+
+:class:`SurfaceLocator` answers the two queries of the paper's octree on a triangle
+surface, vectorised over many query points:
+
+* :meth:`SurfaceLocator.closest` -- the exact closest point of the triangle set
+  (libigl's AABB tree, float64, on coordinates shifted to the bounding-box centre; VTK's
+  static cell locator when libigl is missing). Measured on the 2-core machine (shared
+  with other jobs), 100k queries, cessna210: 25k triangles 0.6-0.8 s (VTK 1.9-4 s,
+  trimesh.proximity ~80 s); subdivided to 1.5M triangles: tree 2.5 s, queries 3.4-10 s
+  (VTK 30-230 s). All three agree to 1e-16 of the diagonal;
+* :meth:`SurfaceLocator.raycast` -- the nearest hit along each ray (Embree through
+  ``embreex`` finds the triangle in float32; every hit is then recomputed in float64
+  by Moller-Trumbore on that triangle, falling back to the triangles around it when
+  the float32 hit lies on or near a shared edge, so hit points lie on their triangle to
+  float64 precision and ties go to the lowest triangle index). 100k rays: 0.05 s on 25k
+  triangles; 1.5M triangles: scene 1.3 s, rays 0.2-3 s.
+
+The pipeline functions on top (:func:`project_wing_stations`, :func:`project_polyline`,
+:func:`project_layout`) turn a :class:`~shellmesh_mdao.layout.Layout` into projected
+seed points on the skin.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ProjectionError
+
+__all__ = ["SurfaceLocator", "closest_point_on_triangles", "ray_triangle_intersect",
+           "project_wing_stations", "project_polyline", "project_layout", "ProjectedMember"]
+
+
+# ----------------------------------------------------------------------------- kernels
+def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Closest point of triangle ``(a[i], b[i], c[i])`` to ``p[i]``, row-wise (Ericson's
+    region test, vectorised). All inputs (k, 3) float64 (or broadcastable); returns (k, 3).
+    Degenerate triangles are handled by the edge regions."""
+    p, a, b, c = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (p, a, b, c)))
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = np.einsum("ij,ij->i", ab, ap)
+    d2 = np.einsum("ij,ij->i", ac, ap)
+    bp = p - b
+    d3 = np.einsum("ij,ij->i", ab, bp)
+    d4 = np.einsum("ij,ij->i", ac, bp)
+    cp = p - c
+    d5 = np.einsum("ij,ij->i", ab, cp)
+    d6 = np.einsum("ij,ij->i", ac, cp)
+    va = d3 * d6 - d5 * d4
+    vb = d5 * d2 - d1 * d6
+    vc = d1 * d4 - d3 * d2
+
+    out = np.empty_like(p)
+    done = np.zeros(len(p), dtype=bool)
+
+    def put(mask, val):
+        m = mask & ~done
+        if m.any():
+            out[m] = val[m] if val.ndim == 2 else val
+        done[m] = True
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        put((d1 <= 0) & (d2 <= 0), a)                                      # vertex a
+        put((d3 >= 0) & (d4 <= d3), b)                                     # vertex b
+        put((d6 >= 0) & (d5 <= d6), c)                                     # vertex c
+        v = d1 / (d1 - d3)
+        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + v[:, None] * ab)        # edge ab
+        w = d2 / (d2 - d6)
+        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + w[:, None] * ac)        # edge ac
+        w2 = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), b + w2[:, None] * (c - b))  # edge bc
+        denom = va + vb + vc
+        vv = vb / denom
+        ww = vc / denom
+        inside = a + vv[:, None] * ab + ww[:, None] * ac
+        rest = ~done
+        if rest.any():
+            ok = rest & np.isfinite(inside).all(1)
+            out[ok] = inside[ok]
+            done[ok] = True
+    if not done.all():  # fully degenerate (zero-area) triangles left: nearest of the 3 edges
+        r = np.flatnonzero(~done)
+        cands = [_closest_on_segment(p[r], a[r], b[r]), _closest_on_segment(p[r], b[r], c[r]),
+                 _closest_on_segment(p[r], c[r], a[r])]
+        d = np.stack([np.einsum("ij,ij->i", q - p[r], q - p[r]) for q in cands], 1)
+        k = np.argmin(d, axis=1)
+        out[r] = np.stack(cands, 1)[np.arange(len(r)), k]
+    return out
+
+
+def _closest_on_segment(p, a, b):
+    ab = b - a
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.divide(np.einsum("ij,ij->i", p - a, ab), L2, out=np.zeros(len(p)), where=L2 > 0)
+    return a + np.clip(t, 0.0, 1.0)[:, None] * ab
+
+
+def ray_triangle_intersect(o, d, a, b, c):
+    """Moller-Trumbore in float64, row-wise: ray ``o + t d`` against triangle ``(a, b, c)``.
+
+    Returns ``(t, u, v, det)``: the hit point is ``a + u (b-a) + v (c-a) = o + t d``;
+    the ray hits the closed triangle when ``det != 0``, ``u >= 0``, ``v >= 0``,
+    ``u + v <= 1``. ``t`` is in units of ``|d|``."""
+    o, d, a, b, c = (np.asarray(x, dtype=np.float64) for x in (o, d, a, b, c))
+    e1 = b - a
+    e2 = c - a
+    pv = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, pv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        tv = o - a
+        u = np.einsum("ij,ij->i", tv, pv) * inv
+        qv = np.cross(tv, e1)
+        v = np.einsum("ij,ij->i", d, qv) * inv
+        t = np.einsum("ij,ij->i", e2, qv) * inv
+    return t, u, v, det
+
+
+# ----------------------------------------------------------------------------- locator
+class SurfaceLocator:
+    """Closest-point and ray queries on a fixed triangle surface (tree built once).
+
+    Parameters
+    ----------
+    points : (n, 3) float
+    triangles : (t, 3) int
+
+    Attributes ``points``, ``triangles`` (as given, float64/int64), ``diagonal``
+    (bounding-box diagonal), ``face_of_triangle`` (set by :meth:`from_mesh`: the
+    ShellMesh face each triangle came from; identity otherwise).
+    """
+
+    def __init__(self, points, triangles):
+        pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        tri = np.ascontiguousarray(np.asarray(triangles, dtype=np.int64).reshape(-1, 3))
+        if not len(tri):
+            raise ProjectionError("the surface has no triangles: load a non-empty skin surface")
+        if not np.isfinite(pts).all():
+            raise ProjectionError("the surface has NaN/inf coordinates: repair the input surface")
+        if tri.min() < 0 or tri.max() >= len(pts):
+            raise ProjectionError("triangle indices out of range: every index must be in [0, n_points)")
+        self.points = pts
+        self.triangles = tri
+        self.face_of_triangle = np.arange(len(tri), dtype=np.int64)
+        lo, hi = pts[tri.reshape(-1)].min(0), pts[tri.reshape(-1)].max(0)
+        self.diagonal = float(np.linalg.norm(hi - lo))
+        # shift to the box centre: float64 relative precision is then set by the size,
+        # not by the position of the model; embree additionally scales to a unit box.
+        self._center = 0.5 * (lo + hi)
+        self._scale = 1.0 / self.diagonal if self.diagonal > 0 else 1.0
+        self._local = np.ascontiguousarray(pts - self._center)
+        self._aabb = None
+        self._embree = None
+        self._v2t = None
+
+    @classmethod
+    def from_mesh(cls, mesh) -> "SurfaceLocator":
+        """Locator on a :class:`~shellmesh_mdao.mesh.ShellMesh` (quads split (0,1,2),(0,2,3));
+        ``face_of_triangle`` maps triangle indices back to mesh faces."""
+        tris, parent = mesh.triangles()
+        loc = cls(mesh.points, tris)
+        loc.face_of_triangle = np.asarray(parent, dtype=np.int64)
+        return loc
+
+    # ------------------------------------------------------------------ trees
+    def _tree(self):
+        """libigl AABB tree (exact float64 point-triangle distances); when libigl is not
+        installed, VTK's static cell locator (also exact, about 5-10x slower)."""
+        if self._aabb is None:
+            try:
+                import igl
+                t = igl.AABB()
+                t.init(self._local, self.triangles)
+                self._aabb = ("igl", t)
+            except ImportError:
+                import pyvista as pv
+                cells = np.hstack([np.full((len(self.triangles), 1), 3), self.triangles]).ravel()
+                self._aabb = ("vtk", pv.PolyData(self._local, cells))
+        return self._aabb
+
+    def _closest_tri(self, ql):
+        kind, t = self._tree()
+        if kind == "igl":
+            _, idx, _ = t.squared_distance(self._local, self.triangles, ql)
+        else:
+            idx = t.find_closest_cell(ql)
+        return np.asarray(idx, dtype=np.int64).reshape(-1)
+
+    def _scene(self):
+        if self._embree is None:
+            from embreex import rtcore_scene
+            from embreex.mesh_construction import TriangleMesh
+            scene = rtcore_scene.EmbreeScene()
+            TriangleMesh(scene=scene, vertices=(self._local * self._scale).astype(np.float32),
+                         indices=self.triangles.astype(np.int32))
+            self._embree = scene
+        return self._embree
+
+    def _vertex_triangles(self):
+        """CSR vertex -> incident triangles."""
+        if self._v2t is None:
+            t = self.triangles
+            v = t.reshape(-1)
+            order = np.argsort(v, kind="stable")
+            ptr = np.zeros(len(self.points) + 1, dtype=np.int64)
+            np.cumsum(np.bincount(v, minlength=len(self.points)), out=ptr[1:])
+            self._v2t = (ptr, (order // 3).astype(np.int64))
+        return self._v2t
+
+    # ------------------------------------------------------------------ queries
+    def closest(self, q):
+        """Exact closest point on the triangle set for each query point.
+
+        Returns ``(closest_points (k,3), tri_index (k,), distance (k,))``."""
+        q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, 3))
+        if not len(q):
+            return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0)
+        if not np.isfinite(q).all():
+            raise ProjectionError("closest-point query with NaN/inf coordinates: give finite points")
+        ql = q - self._center
+        idx = self._closest_tri(ql)
+        # recompute the point on the chosen triangle with our own kernel (deterministic,
+        # same formula everywhere), in the shifted frame
+        t = self.triangles[idx]
+        cl = closest_point_on_triangles(ql, self._local[t[:, 0]], self._local[t[:, 1]], self._local[t[:, 2]])
+        dist = np.linalg.norm(cl - ql, axis=1)
+        return cl + self._center, idx, dist
+
+    def raycast(self, origins, directions):
+        """Nearest hit of each ray ``origin + t * direction``, ``t > 0``.
+
+        Returns ``(hit_points (k,3), tri_index (k,), distance (k,))``; a miss has
+        ``tri_index == -1``, ``distance == inf`` and NaN hit point. ``distance`` is the
+        Euclidean distance from the origin to the hit."""
+        o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        o, d = np.broadcast_arrays(o, d)
+        k = len(o)
+        hit_pts = np.full((k, 3), np.nan)
+        tri_idx = np.full(k, -1, dtype=np.int64)
+        dist = np.full(k, np.inf)
+        if not k:
+            return hit_pts, tri_idx, dist
+        if not (np.isfinite(o).all() and np.isfinite(d).all()):
+            raise ProjectionError("ray query with NaN/inf origin or direction: give finite values")
+        dn = np.linalg.norm(d, axis=1)
+        if (dn <= 0).any():
+            bad = np.flatnonzero(dn <= 0)[:5].tolist()
+            raise ProjectionError(f"ray direction of zero length (rays {bad}): give a non-zero direction")
+        d = d / dn[:, None]
+        ol = o - self._center
+        res = self._scene().run((ol * self._scale).astype(np.float32), d.astype(np.float32), output=1)
+        prim = np.asarray(res["primID"], dtype=np.int64)
+        hit = np.flatnonzero(prim >= 0)
+        if not len(hit):
+            return hit_pts, tri_idx, dist
+        tri_f, t_f, p_f = self._refine(ol[hit], d[hit], prim[hit])
+        hit_pts[hit] = p_f + self._center
+        tri_idx[hit] = tri_f
+        dist[hit] = np.linalg.norm(p_f - ol[hit], axis=1)
+        return hit_pts, tri_idx, dist
+
+    def _refine(self, o, d, prim):
+        """float64 re-intersection of rays (local frame) with their embree triangle,
+        then with the triangles sharing a vertex with it when the hit is outside.
+        Returns (triangle, t, local hit point)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            return self._refine_impl(o, d, prim)
+
+    def _refine_impl(self, o, d, prim):
+        L = self._local
+        T = self.triangles
+        tol = 1e-12
+        t, u, v, det = ray_triangle_intersect(o, d, L[T[prim, 0]], L[T[prim, 1]], L[T[prim, 2]])
+        ok = (det != 0) & (u >= -tol) & (v >= -tol) & (u + v <= 1 + tol) & (t > 0) & np.isfinite(t)
+        # hits within float32 reach of an edge or vertex: embree's choice among the triangles
+        # there is arbitrary, so re-decide among the neighbours with a fixed rule
+        near = ok & (np.minimum(np.minimum(u, v), 1.0 - u - v) < 1e-6)
+        tri = prim.copy()
+        pts = np.empty_like(o)
+        bad = np.flatnonzero(~ok | near)
+        if len(bad):
+            ptr, v2t = self._vertex_triangles()
+            corners = T[prim[bad]]                                   # (b, 3)
+            cnt = ptr[corners + 1] - ptr[corners]                    # (b, 3)
+            tot = cnt.sum(1)
+            ray_of = np.repeat(np.arange(len(bad)), tot)
+            flat_c = corners.reshape(-1)
+            flat_n = cnt.reshape(-1)
+            starts = np.repeat(ptr[flat_c], flat_n)
+            offs = np.arange(flat_n.sum()) - np.repeat(np.cumsum(flat_n) - flat_n, flat_n)
+            cand = v2t[starts + offs]
+            rb = bad[ray_of]
+            t2, u2, v2, det2 = ray_triangle_intersect(o[rb], d[rb], L[T[cand, 0]], L[T[cand, 1]], L[T[cand, 2]])
+            ok2 = (det2 != 0) & (u2 >= -tol) & (v2 >= -tol) & (u2 + v2 <= 1 + tol) & (t2 > 0) & np.isfinite(t2)
+            # rule: the nearest valid hit; among hits equally near (to 1e-12 of the size),
+            # the lowest triangle index
+            tmin = np.full(len(bad), np.inf)
+            np.minimum.at(tmin, ray_of, np.where(ok2, t2, np.inf))
+            elig = ok2 & (t2 <= tmin[ray_of] + 1e-12 * self.diagonal)
+            key_c = np.where(elig, cand, np.iinfo(np.int64).max)
+            order = np.lexsort((key_c, ray_of))
+            first = np.ones(len(order), dtype=bool)
+            first[1:] = ray_of[order][1:] != ray_of[order][:-1]
+            sel = order[first]                                       # one per ray, in ray order
+            good = elig[sel]
+            g = bad[good]
+            tri[g] = cand[sel][good]
+            t[g] = t2[sel][good]
+            # still nothing (ray through a vertex within rounding, or grazing): keep the
+            # embree triangle and put the point at the closest point of that triangle
+            # to the embree estimate of the hit
+            still = bad[~good]
+            if len(still):
+                a, b, c = L[T[prim[still], 0]], L[T[prim[still], 1]], L[T[prim[still], 2]]
+                est = o[still] + np.where(np.isfinite(t[still]) & (t[still] > 0), t[still], 0.0)[:, None] * d[still]
+                pts[still] = closest_point_on_triangles(est, a, b, c)
+                t[still] = np.einsum("ij,ij->i", pts[still] - o[still], d[still])
+        else:
+            still = bad
+        on_ray = np.ones(len(o), dtype=bool)
+        on_ray[still] = False
+        pts[on_ray] = o[on_ray] + t[on_ray, None] * d[on_ray]
+        return tri, t, pts
+
+
+# ----------------------------------------------------------------------------- projection
+def _fmt_points(p, idx, limit=4) -> str:
+    sel = np.asarray(idx)[:limit]
+    s = ", ".join("[" + ", ".join(f"{v:.6g}" for v in p[i]) + "]" for i in sel)
+    more = f" (and {len(idx) - limit} more)" if len(idx) > limit else ""
+    return s + more
+
+
+def _up_of(wing) -> np.ndarray:
+    up = getattr(wing, "up", wing)
+    if up is None:
+        raise ProjectionError("no 'up' direction given for the wing: resolve the layout first "
+                              "(Layout.members() gives every member its wing's up)")
+    u = np.asarray(up, dtype=np.float64).reshape(3)
+    n = np.linalg.norm(u)
+    if not np.isfinite(n) or n == 0:
+        raise ProjectionError(f"'up' {u.tolist()} is zero or not finite: give the chord-plane normal")
+    return u / n
+
+
+def project_wing_stations(locator: SurfaceLocator, wing, points, name: str = "member"):
+    """Project points of a wing's chord plane onto its upper and lower skin.
+
+    Each point casts one ray along ``+up`` and one along ``-up`` and keeps the first hit,
+    so the wing's own skin is found even where a fuselage or tail lies further along the
+    same line. ``wing`` is anything with an ``up`` attribute (a :class:`MemberSpec`, a
+    :class:`~shellmesh_mdao.layout.WingLayout` with its own up) or the up vector itself.
+
+    Returns ``(upper_hits, lower_hits)``, each a tuple ``(points (k,3), tri (k,))``.
+    Raises :class:`ProjectionError` naming ``name`` and the points whose ray misses."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    up = _up_of(wing)
+    k = len(pts)
+    o = np.vstack([pts, pts])
+    d = np.vstack([np.broadcast_to(up, (k, 3)), np.broadcast_to(-up, (k, 3))])
+    hp, ti, _ = locator.raycast(o, d)
+    miss = ti < 0
+    if miss.any():
+        mu = np.flatnonzero(miss[:k])
+        ml = np.flatnonzero(miss[k:])
+        parts = []
+        if len(mu):
+            parts.append(f"upward (+up) from {_fmt_points(pts, mu)}")
+        if len(ml):
+            parts.append(f"downward (-up) from {_fmt_points(pts, ml)}")
+        raise ProjectionError(
+            f"member '{name}': rays miss the skin {'; '.join(parts)}: the member's chord-plane points must lie "
+            "inside the wing; check the wing corners (root_le/root_te/tip_le/tip_te), 'up', the stations and "
+            "the chord fractions")
+    return (hp[:k], ti[:k]), (hp[k:], ti[k:])
+
+
+def project_polyline(locator: SurfaceLocator, points, direction=None, name: str = "member"):
+    """Project a polyline onto the skin: along ``direction`` (nearest hit at ``t > 0``,
+    so a line that starts inside the body takes the first skin crossing along
+    ``+direction``) or, with ``direction=None``, to the closest skin point.
+
+    Returns ``(points (k,3), tri (k,))``; raises :class:`ProjectionError` naming ``name``
+    and the points whose ray misses."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if direction is None:
+        cp, tri, _ = locator.closest(pts)
+        return cp, tri
+    d = np.asarray(direction, dtype=np.float64)
+    if d.ndim == 1:
+        d = np.broadcast_to(d, pts.shape)
+    hp, tri, _ = locator.raycast(pts, d)
+    miss = np.flatnonzero(tri < 0)
+    if len(miss):
+        raise ProjectionError(
+            f"member '{name}': projecting along {np.round(np.asarray(direction, float).reshape(-1, 3)[0], 6).tolist()} "
+            f"misses the skin from {_fmt_points(pts, miss)}: move these points so that the direction points "
+            "towards the skin, or omit 'direction' to project to the closest skin point")
+    return hp, tri
+
+
+@dataclass
+class ProjectedMember:
+    """Seeds of one member on the skin: ``seeds`` (k,3) its defining points (wing
+    members: on the chord plane and the member plane; explicit members: the ``upper``
+    polyline), ``upper``/``lower`` (k,3) their projections and ``upper_tri``/``lower_tri``
+    (k,) the surface triangles hit (explicit members: ``lower_seeds`` holds the lower
+    polyline, which may have a different length)."""
+
+    name: str
+    kind: str
+    seeds: np.ndarray
+    upper: np.ndarray
+    lower: np.ndarray
+    upper_tri: np.ndarray
+    lower_tri: np.ndarray
+    lower_seeds: np.ndarray | None = None
+
+
+def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
+    """Project every member of ``layout`` (a :class:`~shellmesh_mdao.layout.Layout`, a dict
+    or a path) onto the skin: ``{member name: ProjectedMember}`` in :meth:`Layout.members`
+    order. Wing members cast ``n_seeds`` points of their chord-plane curve along
+    ``+/-up``; explicit members project their upper and lower polylines."""
+    from .layout import load_layout
+    lay = load_layout(layout)
+    out = {}
+    specs = lay.members()
+    wing_specs = [m for m in specs if m.kind != "explicit"]
+    if wing_specs:
+        # one batched ray cast for all wing members (grouped by up only via broadcasting)
+        seeds = [m.seed_points(n_seeds) for m in wing_specs]
+        cnt = np.array([len(s) for s in seeds])
+        o = np.vstack(seeds)
+        ups = np.repeat(np.stack([m.up for m in wing_specs]), cnt, axis=0)
+        hp, ti, _ = locator.raycast(np.vstack([o, o]), np.vstack([ups, -ups]))
+        n = len(o)
+        off = np.concatenate([[0], np.cumsum(cnt)])
+        for i, m in enumerate(wing_specs):
+            sl = slice(off[i], off[i + 1])
+            up_t, lo_t = ti[:n][sl], ti[n:][sl]
+            if (up_t < 0).any() or (lo_t < 0).any():
+                project_wing_stations(locator, m, seeds[i], name=m.name)  # raises with the details
+            out[m.name] = ProjectedMember(m.name, m.kind, seeds[i], hp[:n][sl].copy(), hp[n:][sl].copy(),
+                                          up_t.copy(), lo_t.copy())
+    for m in specs:
+        if m.kind != "explicit":
+            continue
+        up_p, up_t = project_polyline(locator, m.upper, m.direction, name=m.name)
+        lo_p, lo_t = project_polyline(locator, m.lower, m.lower_direction, name=m.name)
+        out[m.name] = ProjectedMember(m.name, m.kind, m.upper.copy(), up_p, lo_p, up_t, lo_t,
+                                      lower_seeds=m.lower.copy())
+    return {m.name: out[m.name] for m in specs}

@@ -1,0 +1,320 @@
+"""SurfaceLocator exactness (against brute force) and projection of layouts onto the corpus."""
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from shellmesh_mdao.errors import ProjectionError
+from shellmesh_mdao.layout import layout_from_manifest, load_layout
+from shellmesh_mdao.mesh import ShellMesh
+from shellmesh_mdao.project import (SurfaceLocator, closest_point_on_triangles, project_layout, project_polyline,
+                                    project_wing_stations, ray_triangle_intersect)
+
+DOC = Path(__file__).resolve().parents[1] / "docs" / "layout.md"
+GEOMS = ["cessna210", "swept_wing", "straight_wing", "bwb"]
+
+
+# ----------------------------------------------------------------------------- brute force
+def brute_closest(P, T, q):
+    """Exact closest distance by checking every triangle (float64)."""
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    out = np.empty(len(q))
+    for i, x in enumerate(q):
+        p = closest_point_on_triangles(np.broadcast_to(x, a.shape), a, b, c)
+        out[i] = np.sqrt(((p - x) ** 2).sum(1).min())
+    return out
+
+
+def brute_ray(P, T, o, d):
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    dist = np.full(len(o), np.inf)
+    tri = np.full(len(o), -1)
+    for i in range(len(o)):
+        dd = d[i] / np.linalg.norm(d[i])
+        t, u, v, det = ray_triangle_intersect(np.broadcast_to(o[i], a.shape), np.broadcast_to(dd, a.shape), a, b, c)
+        with np.errstate(invalid="ignore"):
+            ok = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+        if ok.any():
+            j = np.flatnonzero(ok)[np.argmin(t[ok])]
+            dist[i], tri[i] = t[j], j
+    return dist, tri
+
+
+def on_triangle_dist(P, T, tri, x):
+    t = T[tri]
+    p = closest_point_on_triangles(x, P[t[:, 0]], P[t[:, 1]], P[t[:, 2]])
+    return np.linalg.norm(p - x, axis=1)
+
+
+def sphere(sub=2):
+    m = trimesh.creation.icosphere(subdivisions=sub)
+    return np.asarray(m.vertices, float), np.asarray(m.faces, np.int64)
+
+
+def soup(n=300, seed=1):
+    """Random triangles of very different sizes, some slivers and one degenerate."""
+    rng = np.random.default_rng(seed)
+    c = rng.uniform(-1, 1, (n, 3))
+    s = 10 ** rng.uniform(-3, 0, n)
+    P = (c[:, None, :] + s[:, None, None] * rng.normal(size=(n, 3, 3))).reshape(-1, 3)
+    P[5] = P[4] + 1e-9 * (P[3] - P[4])     # a sliver
+    P[8] = P[7] = P[6]                      # a degenerate triangle
+    return P, np.arange(3 * n, dtype=np.int64).reshape(n, 3)
+
+
+# ----------------------------------------------------------------------------- locator: exactness
+@pytest.mark.parametrize("make", [sphere, soup])
+def test_closest_matches_brute_force(make):
+    P, T = make()
+    loc = SurfaceLocator(P, T)
+    rng = np.random.default_rng(7)
+    q = np.vstack([rng.uniform(-2, 2, (150, 3)),            # around
+                   P[rng.integers(0, len(P), 20)],           # on vertices
+                   0.5 * (P[T[:20, 0]] + P[T[:20, 1]]),      # on edges
+                   rng.uniform(-50, 50, (10, 3))])           # far away
+    cp, tri, dist = loc.closest(q)
+    ref = brute_closest(P, T, q)
+    diag = loc.diagonal
+    assert np.abs(dist - ref).max() <= 1e-12 * diag
+    np.testing.assert_allclose(np.linalg.norm(cp - q, axis=1), dist, rtol=0, atol=1e-14 * diag)
+    # the returned point lies on the returned triangle
+    assert on_triangle_dist(P, T, tri, cp).max() <= 1e-13 * diag
+
+
+@pytest.mark.parametrize("make", [sphere, soup])
+def test_raycast_matches_brute_force(make):
+    P, T = make()
+    loc = SurfaceLocator(P, T)
+    rng = np.random.default_rng(3)
+    o = rng.uniform(-1.5, 1.5, (400, 3))
+    d = rng.normal(size=(400, 3))
+    hp, tri, dist = loc.raycast(o, d)
+    ref_d, ref_t = brute_ray(P, T, o, d)
+    assert np.array_equal(tri >= 0, ref_t >= 0)
+    h = tri >= 0
+    assert h.sum() > 50
+    diag = loc.diagonal
+    assert np.abs(dist[h] - ref_d[h]).max() <= 1e-9 * diag
+    # the hit point is on the hit triangle (float64) and on the ray, ahead of the origin
+    assert on_triangle_dist(P, T, tri[h], hp[h]).max() <= 1e-12 * diag
+    dn = d[h] / np.linalg.norm(d[h], axis=1)[:, None]
+    off = hp[h] - o[h]
+    assert np.linalg.norm(off - (off * dn).sum(1)[:, None] * dn, axis=1).max() <= 1e-12 * diag
+    assert ((off * dn).sum(1) > 0).all()
+    np.testing.assert_allclose(np.linalg.norm(off, axis=1), dist[h], rtol=1e-14, atol=0)
+    assert np.all(np.isinf(dist[~h])) and np.all(np.isnan(hp[~h]))
+
+
+def test_raycast_through_edges_and_vertices_hits_exactly():
+    """Rays aimed exactly at shared edges and vertices of a closed sphere: embree's float32
+    triangle may be a neighbour, the float64 refinement must still return a point on a
+    triangle it really hits."""
+    P, T = sphere(2)
+    loc = SurfaceLocator(P, T)
+    targets = np.vstack([0.5 * (P[T[:, 0]] + P[T[:, 1]]), P[::3]])
+    o = np.zeros_like(targets)                       # from the centre, inside
+    hp, tri, dist = loc.raycast(o, targets)
+    assert (tri >= 0).all()
+    np.testing.assert_allclose(hp, targets, atol=1e-12)
+    assert on_triangle_dist(P, T, tri, hp).max() <= 1e-12
+    # ties are broken by a fixed rule: a ray through a vertex reports the lowest-index
+    # triangle around it, whatever embree picked
+    nv = len(P[::3])
+    vid = np.arange(len(P))[::3]
+    lowest = np.array([np.flatnonzero((T == v).any(1)).min() for v in vid])
+    assert np.array_equal(tri[-nv:], lowest)
+    # and from outside, aimed inward at the same points
+    o2 = 3.0 * targets
+    hp2, tri2, _ = loc.raycast(o2, -targets)
+    assert (tri2 >= 0).all()
+    np.testing.assert_allclose(hp2, targets, atol=1e-12)
+    # rays passing 1e-8..1e-10 beside an edge: below float32 resolution, so embree may name
+    # the neighbour triangle; the returned point must still lie on the returned triangle
+    mid = 0.5 * (P[T[:, 0]] + P[T[:, 1]])
+    side = P[T].mean(1) - mid
+    side /= np.linalg.norm(side, axis=1)[:, None]
+    for eps in (1e-8, 1e-10):
+        tg = np.vstack([mid + eps * side, mid - eps * side])
+        hp, tri, dist = loc.raycast(np.zeros_like(tg), tg)
+        assert (tri >= 0).all()
+        assert on_triangle_dist(P, T, tri, hp).max() <= 1e-14
+        np.testing.assert_allclose(hp, tg / np.linalg.norm(tg, axis=1)[:, None] * dist[:, None], atol=1e-15)
+        assert np.abs(hp - tg).max() < 1e-3
+
+
+def test_large_offset_and_scale_do_not_lose_precision():
+    P, T = sphere(2)
+    rng = np.random.default_rng(0)
+    o = rng.uniform(-0.5, 0.5, (200, 3))
+    d = rng.normal(size=(200, 3))
+    base_loc = SurfaceLocator(P, T)
+    h0, t0, d0 = base_loc.raycast(o, d)
+    c0, ct0, cd0 = base_loc.closest(o)
+    for s, shift in ((1e-3, 0.0), (1e3, 0.0), (1.0, 1e5), (1e-3, 10.0)):
+        loc = SurfaceLocator(P * s + shift, T)
+        h, t, dd = loc.raycast(o * s + shift, d)
+        assert np.array_equal(t, t0)
+        # float64 error of the shifted coordinates is ~1e-16 * shift
+        tol = 1e-12 * s + 4e-16 * shift
+        assert np.abs(h - (h0 * s + shift)).max() <= tol
+        c, ct, cd = loc.closest(o * s + shift)
+        assert np.abs(cd - cd0 * s).max() <= tol
+
+
+def test_deterministic_and_from_mesh_with_quads():
+    P, T = sphere(1)
+    loc1, loc2 = SurfaceLocator(P, T), SurfaceLocator(P.copy(), T.copy())
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-2, 2, (500, 3))
+    d = rng.normal(size=(500, 3))
+    for a, b in zip(loc1.closest(q) + loc1.raycast(q, d), loc2.closest(q) + loc2.raycast(q, d)):
+        assert np.array_equal(a, b, equal_nan=True)
+    # a unit cube of 6 quads: closest point of (2, 0.5, 0.5) is on the x=1 face
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    quads = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
+    loc = SurfaceLocator.from_mesh(ShellMesh(pts, quads))
+    assert len(loc.triangles) == 12
+    cp, tri, dist = loc.closest([[2.0, 0.5, 0.4]])
+    np.testing.assert_allclose(cp, [[1.0, 0.5, 0.4]], atol=1e-15)
+    assert loc.face_of_triangle[tri[0]] == 3 and dist[0] == pytest.approx(1.0)
+    hp, tri, dist = loc.raycast([[0.5, 0.5, 0.5]], [[0.0, 0.0, -1.0]])
+    assert loc.face_of_triangle[tri[0]] == 0 and dist[0] == pytest.approx(0.5, abs=1e-15)
+
+
+def test_bad_queries_raise():
+    P, T = sphere(1)
+    loc = SurfaceLocator(P, T)
+    with pytest.raises(ProjectionError, match="zero length"):
+        loc.raycast([[0, 0, 0]], [[0, 0, 0]])
+    with pytest.raises(ProjectionError, match="NaN"):
+        loc.closest([[np.nan, 0, 0]])
+    with pytest.raises(ProjectionError, match="no triangles"):
+        SurfaceLocator(P, np.zeros((0, 3), int))
+
+
+def test_first_hit_is_the_inner_body():
+    """Seeds inside a small 'wing' box enclosed by a big 'fuselage' box: the wing is hit."""
+    small = trimesh.creation.box(extents=[2.0, 6.0, 0.2])
+    big = trimesh.creation.box(extents=[10.0, 10.0, 10.0])
+    P = np.vstack([small.vertices, big.vertices])
+    T = np.vstack([small.faces, big.faces + len(small.vertices)])
+    loc = SurfaceLocator(P, T)
+    seeds = np.array([[x, 1.0, 0.0] for x in np.linspace(-0.9, 0.9, 5)])
+    (up, ut), (lo, lt) = project_wing_stations(loc, [0, 0, 1], seeds, name="w/rib_0")
+    np.testing.assert_allclose(up[:, 2], 0.1, atol=1e-14)
+    np.testing.assert_allclose(lo[:, 2], -0.1, atol=1e-14)
+    assert (ut < 12).all() and (lt < 12).all()
+    # from outside the wing box the first hit along +up is the fuselage and along -up the wing
+    with pytest.raises(ProjectionError, match=r"member 'w/rib_0': rays miss the skin upward"):
+        project_wing_stations(SurfaceLocator(small.vertices, small.faces), [0, 0, 1], [[0, 0, 0], [0, 0, 5.0]],
+                              name="w/rib_0")
+
+
+# ----------------------------------------------------------------------------- corpus
+@pytest.fixture(scope="module")
+def locators(geometry_dir, manifest):
+    out = {}
+    for g in GEOMS:
+        m = trimesh.load(geometry_dir / manifest["geometries"][g]["file"], process=False)
+        out[g] = SurfaceLocator(np.asarray(m.vertices), np.asarray(m.faces))
+    return out
+
+
+@pytest.mark.parametrize("g", GEOMS)
+def test_manifest_corners_lie_on_the_skin(g, manifest, locators):
+    loc = locators[g]
+    for w in manifest["geometries"][g]["wings"]:
+        corners = np.array([w["root_le"], w["root_te"], w["tip_le"], w["tip_te"]], float)
+        chord = np.linalg.norm(corners[1] - corners[0])
+        cp, tri, dist = loc.closest(corners)
+        assert dist.max() < 2e-3 * chord, (g, w["name"], dist / chord)
+
+
+@pytest.mark.parametrize("g", GEOMS)
+def test_every_station_projects_above_and_below(g, manifest, locators):
+    loc = locators[g]
+    lay = layout_from_manifest(manifest, g, ribs=10, spars=[0.15, 0.65])
+    proj = project_layout(loc, lay, n_seeds=7)
+    specs = {m.name: m for m in lay.members()}
+    assert list(proj) == [m.name for m in lay.members()]
+    assert len(proj) == 12 * len(manifest["geometries"][g]["wings"])
+    diag = loc.diagonal
+    for name, p in proj.items():
+        up = specs[name].up
+        assert ((p.upper - p.seeds) @ up > 0).all(), name
+        assert ((p.lower - p.seeds) @ up < 0).all(), name
+        # hits lie on the input surface
+        _, _, d_up = loc.closest(p.upper)
+        _, _, d_lo = loc.closest(p.lower)
+        assert max(d_up.max(), d_lo.max()) <= 1e-9 * diag, name
+        assert on_triangle_dist(loc.points, loc.triangles, p.upper_tri, p.upper).max() <= 1e-9 * diag
+        # and in the member plane (the rays run along up, which the plane contains)
+        m = specs[name]
+        assert np.abs((p.upper - m.plane_point) @ m.plane_normal).max() <= 1e-9 * diag
+
+
+def test_cessna_root_rays_hit_the_wing_not_the_fuselage(manifest, locators):
+    loc = locators["cessna210"]
+    lay = layout_from_manifest(manifest, "cessna210", ribs=10, spars=[0.15, 0.65])
+    proj = project_layout(loc, lay, n_seeds=9)
+    for wing in ("right_wing", "left_wing"):
+        w = lay.wing(wing)
+        chord = np.linalg.norm(np.subtract(w.root_te, w.root_le))
+        for name in (f"{wing}/rib_0", f"{wing}/spar_0", f"{wing}/spar_1"):
+            p = proj[name]
+            up = np.array([0, 0, 1.0])
+            h_up = (p.upper - p.seeds) @ up
+            h_lo = (p.seeds - p.lower) @ up
+            # within the wing's thickness (15 % section): the fuselage is metres away
+            assert (h_up < 0.12 * chord).all() and (h_lo < 0.12 * chord).all(), (name, h_up, h_lo)
+            assert ((h_up + h_lo) > 0.01 * chord).all()
+
+
+def test_project_polyline_and_doc_example_on_cessna(locators):
+    loc = locators["cessna210"]
+    ex = json.loads(re.findall(r"```json\n(.*?)```", DOC.read_text(), flags=re.S)[0])
+    lay = load_layout(ex)
+    proj = project_layout(loc, lay)
+    b = proj["bulkhead_1"]
+    # upper curve drawn above the cabin, projected down onto its roof; lower projected up onto the belly
+    assert (b.upper[:, 2] < 8.0).all() and (b.lower[:, 2] > -3.0).all() and (b.upper[:, 2] > b.lower[:, 2]).all()
+    np.testing.assert_allclose(b.upper[:, :2], np.asarray(ex["members"][0]["upper"])[:, :2], atol=1e-12)
+    _, _, d = loc.closest(np.vstack([b.upper, b.lower]))
+    assert d.max() <= 1e-9 * loc.diagonal
+    # closest-point projection
+    pts = np.array([[4.0, 0.0, 8.0], [4.0, 0.0, -3.0]])
+    cp, tri = project_polyline(loc, pts)
+    ref, _, _ = loc.closest(pts)
+    assert np.array_equal(cp, ref)
+    # a projection that misses names the member and the points
+    with pytest.raises(ProjectionError, match=r"member 'frame_9'.*\[4, 0, 8\]"):
+        project_polyline(loc, pts[:1], direction=[0, 0, 1], name="frame_9")
+    bad = dict(ex)
+    bad["members"] = [dict(ex["members"][0], name="frame_9", direction=[0, 0, 1])]
+    with pytest.raises(ProjectionError, match="member 'frame_9'"):
+        project_layout(loc, bad)
+
+
+def test_wing_member_missing_the_skin_is_named(manifest, locators):
+    g = manifest["geometries"]["straight_wing"]
+    w = dict(g["wings"][0])
+    # push the root corners 1 chord below the wing: the ribs' chord-plane points are outside
+    for k in ("root_le", "root_te"):
+        w[k] = [w[k][0], w[k][1], w[k][2] - 1.0]
+    lay = load_layout({"up": g["up"], "wings": [dict(w, ribs={"count": 3})]})
+    with pytest.raises(ProjectionError, match=r"member 'wing/rib_0': rays miss the skin .*\[-0.75"):
+        project_layout(locators["straight_wing"], lay)
+
+
+def test_closest_without_libigl_falls_back_to_vtk(monkeypatch):
+    import sys
+    monkeypatch.setitem(sys.modules, "igl", None)       # import igl -> ImportError
+    P, T = soup(120, seed=4)
+    loc = SurfaceLocator(P, T)
+    q = np.random.default_rng(2).uniform(-2, 2, (60, 3))
+    cp, tri, dist = loc.closest(q)
+    assert loc._tree()[0] == "vtk"
+    assert np.abs(dist - brute_closest(P, T, q)).max() <= 1e-12 * loc.diagonal
