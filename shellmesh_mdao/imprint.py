@@ -412,8 +412,9 @@ def _retriangulate(P, fs, ss, edge_node, comp):
 
 
 def _split_hanging(P, T, C, uedges, new_id):
-    """Split faces that still contain an edge which received a new node (faces outside the
-    cut region sharing a crossed edge), keeping the mesh conforming."""
+    """Split every triangle that has an edge which received a new node (``uedges[i]`` got
+    node ``new_id[i]``): one split edge -> 2 triangles, two -> 3 (best diagonal), three -> 4.
+    Keeps the mesh conforming."""
     if not len(uedges):
         return T, C
     n = int(max(T.max(), new_id.max())) + 1
@@ -424,31 +425,61 @@ def _split_hanging(P, T, C, uedges, new_id):
     k = np.minimum(a, b) * n + np.maximum(a, b)
     pos = np.clip(np.searchsorted(key, k), 0, len(key) - 1)
     hit = key[pos] == k
-    if not hit.any():
+    nhit = hit.sum(1)
+    if not nhit.any():
         return T, C
-    rows = np.flatnonzero(hit.any(1))
-    if (hit[rows].sum(1) > 1).any():
-        raise ImprintError("a skin triangle outside the imprint region has two cut edges; "
-                           "use a smaller --size")
-    col = np.argmax(hit[rows], axis=1)
-    f = T[rows]
-    idx = (col[:, None] + np.arange(3)[None]) % 3
-    f = np.take_along_axis(f, idx, 1)                       # edge f0-f1 is the cut one
-    m = node[pos[rows, col]]
-    new = np.vstack([np.stack([f[:, 0], m, f[:, 2]], 1), np.stack([m, f[:, 1], f[:, 2]], 1)])
-    keep = np.ones(len(T), bool)
-    keep[rows] = False
-    return np.vstack([T[keep], new]), np.concatenate([C[keep], C[rows], C[rows]])
+    mid = np.where(hit, node[pos], -1)                    # node on side i (corner i -> i+1)
+    out_t, out_c = [T[nhit == 0]], [C[nhit == 0]]
+    # one split side: rotate so the split side is 0 (corners 0-1)
+    r = np.flatnonzero(nhit == 1)
+    if len(r):
+        col = np.argmax(hit[r], axis=1)
+        idx = (col[:, None] + np.arange(3)[None]) % 3
+        f = np.take_along_axis(T[r], idx, 1)
+        m = mid[r, col]
+        out_t += [np.stack([f[:, 0], m, f[:, 2]], 1), np.stack([m, f[:, 1], f[:, 2]], 1)]
+        out_c += [C[r], C[r]]
+    # two split sides: rotate so the unsplit side is 2 (corners 2-0); sides 0 and 1 split
+    r = np.flatnonzero(nhit == 2)
+    if len(r):
+        col = (np.argmin(hit[r], axis=1) + 1) % 3           # first split side after the unsplit one
+        idx = (col[:, None] + np.arange(3)[None]) % 3
+        f = np.take_along_axis(T[r], idx, 1)
+        m0 = mid[r, col]
+        m1 = mid[r, (col + 1) % 3]
+        out_t.append(np.stack([m0, f[:, 1], m1], 1))
+        out_c.append(C[r])
+        # quad f0, m0, m1, f2
+        t1a, t1b = np.stack([f[:, 0], m0, m1], 1), np.stack([f[:, 0], m1, f[:, 2]], 1)
+        t2a, t2b = np.stack([f[:, 0], m0, f[:, 2]], 1), np.stack([m0, m1, f[:, 2]], 1)
+        q1 = np.minimum(_tri_angles_min(P, t1a), _tri_angles_min(P, t1b))
+        q2 = np.minimum(_tri_angles_min(P, t2a), _tri_angles_min(P, t2b))
+        u = (q1 >= q2)[:, None]
+        out_t += [np.where(u, t1a, t2a), np.where(u, t1b, t2b)]
+        out_c += [C[r], C[r]]
+    r = np.flatnonzero(nhit == 3)
+    if len(r):
+        f = T[r]
+        m0, m1, m2 = mid[r, 0], mid[r, 1], mid[r, 2]
+        out_t += [np.stack([f[:, 0], m0, m2], 1), np.stack([m0, f[:, 1], m1], 1),
+                  np.stack([m2, m1, f[:, 2]], 1), np.stack([m0, m1, m2], 1)]
+        out_c += [C[r]] * 4
+    return np.vstack(out_t), np.concatenate(out_c)
 
 
 def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np.ndarray, chains,
-                   snap: float = 0.25, tol: float = 1e-9):
+                   snap: float = 0.25, tol: float = 1e-9, locator=None):
     """Imprint every chain of ``chains`` (list of :class:`ChainSpec`) into the triangle
     ``skin`` (vertices on the input surface given by ``surface_points``/``surface_tris``).
 
     Returns ``(mesh, results)``: the imprinted skin (feature edges of each chain tagged with
     the member's component id, chain vertices fixed) and one :class:`ChainResult` per chain.
+    ``locator``: a :class:`~shellmesh_mdao.project.SurfaceLocator` of the input surface (built
+    when not given) used to put new skin vertices onto it.
     """
+    if locator is None:
+        from .project import SurfaceLocator
+        locator = SurfaceLocator(surface_points, surface_tris)
     if skin.n_quads:
         raise ImprintError("imprint works on a triangle skin; got quads (run it before merging)")
     diag = float(np.linalg.norm(surface_points.max(0) - surface_points.min(0)))
@@ -456,14 +487,10 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     # 1. exact arcs on the input surface
     arcs = [section_arc(surface_points, surface_tris, c.plane, c.bounds, seed=c.seed, seed_tri=c.seed_tri,
                         name=f"{c.member} ({c.side})") for c in chains]
-    # 2. crossing points = ends of open arcs, deduplicated
-    ends = [a.points[[0, -1]] for a in arcs if not a.closed]
-    arc_end_rows = {}
-    row = 0
-    for i, a in enumerate(arcs):
-        if not a.closed:
-            arc_end_rows[i] = (row, row + 1)
-            row += 2
+    # 2. crossing points: ends of open arcs, and points where one arc crosses another
+    #    member's plane ON that member's arc (a middle spar crossing a rib); deduplicated
+    cand = [a.points[[0, -1]] for a in arcs if not a.closed]
+    cand += _arc_crossings(chains, arcs, eps)
     P, T, C = skin.points.copy(), skin.faces[:, :3].copy(), skin.component.copy()
     names = list(skin.component_names)
     fixed = np.zeros(len(P), bool)
@@ -473,24 +500,39 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     feat_v = np.zeros(len(P), bool)
     feat_v[skin.feature_edges.ravel()] = True
     cross_ids = np.zeros(0, np.int64)
-    if ends:
-        X = np.vstack(ends)
-        tree = cKDTree(X)
-        pairs = tree.query_pairs(eps, output_type="ndarray")
+    Xu = np.zeros((0, 3))
+    if cand:
+        X = np.vstack(cand)
+        pairs = cKDTree(X).query_pairs(eps, output_type="ndarray")
         rep = np.arange(len(X))
-        for i, j in sorted(map(tuple, pairs)):        # few points: crossing points of members
-            rep[max(i, j)] = min(rep[i], rep[j])
+        if len(pairs):
+            from scipy import sparse
+            from scipy.sparse.csgraph import connected_components
+            g = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(X), len(X)))
+            _, lab = connected_components(g, directed=False)
+            first = np.full(lab.max() + 1, len(X))
+            np.minimum.at(first, lab, np.arange(len(X)))
+            rep = first[lab]
         uniq = np.unique(rep)
-        rep_pos = np.searchsorted(uniq, rep)             # row of X -> index into uniq/cross_ids
+        Xu = X[uniq]
         cross_ids = np.empty(len(uniq), np.int64)
-        for k, u in enumerate(uniq):
+        for k in range(len(uniq)):             # a few points per member
             movable = ~(fixed | feat_v)
-            movable = np.concatenate([movable, np.zeros(max(0, len(P) - len(movable)), bool)])
-            P, T, C, vid = insert_point(P, T, C, X[u], movable)
+            P, T, C, vid = insert_point(P, T, C, Xu[k], movable)
             cross_ids[k] = vid
-            fixed = np.concatenate([fixed, np.zeros(len(P) - len(fixed), bool)])
-            feat_v = np.concatenate([feat_v, np.zeros(len(P) - len(feat_v), bool)])
+            grow = len(P) - len(fixed)
+            fixed = np.concatenate([fixed, np.zeros(grow, bool)])
+            feat_v = np.concatenate([feat_v, np.zeros(grow, bool)])
             fixed[vid] = True
+        if len(np.unique(cross_ids)) != len(cross_ids):
+            raise ImprintError("two member crossing points fell on the same skin vertex: members are closer "
+                               "than the element size; use a smaller --size or move the members apart")
+        # an edge joining two crossing vertices (e.g. the upper and lower crossing of a thin
+        # section on a coarse skin) would make the plane run along it: split it
+        P, T, C = _split_edges_between(P, T, C, cross_ids, locator)
+        grow = len(P) - len(fixed)
+        fixed = np.concatenate([fixed, np.zeros(grow, bool)])
+        feat_v = np.concatenate([feat_v, np.zeros(grow, bool)])
     results = []
     for ci, (spec, arc) in enumerate(zip(chains, arcs)):
         member_id = names.index(spec.member) if spec.member in names else (names.append(spec.member) or len(names) - 1)
@@ -500,8 +542,9 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             on[xs] = True
         movable = ~(fixed | feat_v)
         endv = None
-        if ci in arc_end_rows:
-            endv = cross_ids[rep_pos[list(arc_end_rows[ci])]]
+        if not arc.closed:
+            d_end, i_end = cKDTree(Xu).query(arc.points[[0, -1]])
+            endv = cross_ids[i_end]
         P, T, C, chain_v, (split_e, new_n) = cut_chain(P, T, C, spec, arc, movable, on, snap=snap,
                                                        end_vertices=endv)
         grow = len(P) - len(fixed)
@@ -522,6 +565,45 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     return mesh, results
 
 
+def _split_edges_between(P, T, C, verts, locator):
+    """Split every edge whose two ends are both in ``verts`` at its midpoint, projected onto
+    the input surface (both incident triangles are split in two)."""
+    is_v = np.zeros(len(P), bool)
+    is_v[verts] = True
+    a, b = T, np.roll(T, -1, axis=1)
+    hit = is_v[a] & is_v[b]
+    if not hit.any():
+        return P, T, C
+    e = np.unique(np.sort(np.stack([a[hit], b[hit]], 1), axis=1), axis=0)
+    mid = 0.5 * (P[e[:, 0]] + P[e[:, 1]])
+    mid = locator.closest(mid)[0]
+    new_id = len(P) + np.arange(len(e))
+    P = np.vstack([P, mid])
+    T, C = _split_hanging(P, T, C, e, new_id)
+    return P, T, C
+
+
+def _arc_crossings(chains, arcs, eps):
+    """Points where arc i crosses the plane of chain j and lies on arc j (within eps)."""
+    out = []
+    for i, (ci, ai) in enumerate(zip(chains, arcs)):
+        p = np.vstack([ai.points, ai.points[:1]]) if ai.closed else ai.points
+        for j, (cj, aj) in enumerate(zip(chains, arcs)):
+            if i == j or cj.member == ci.member:
+                continue
+            s = cj.plane.side(p)
+            k = np.flatnonzero((s[:-1] > eps) & (s[1:] < -eps) | (s[:-1] < -eps) & (s[1:] > eps)
+                               | (np.abs(s[:-1]) <= eps))
+            if not len(k):
+                continue
+            t = np.where(np.abs(s[k]) <= eps, 0.0, s[k] / (s[k] - s[k + 1]))
+            x = p[k] + t[:, None] * (p[k + 1] - p[k])
+            on = np.linalg.norm(closest_on_polyline(x, aj.points, aj.closed) - x, axis=1) <= eps
+            if on.any():
+                out.append(x[on])
+    return out
+
+
 def _split_feature_edges(fe, fid, split_edges, new_nodes):
     if not len(split_edges) or not len(fe):
         return fe, fid
@@ -540,3 +622,112 @@ def _split_feature_edges(fe, fid, split_edges, new_nodes):
     new = np.vstack([np.stack([a, m], 1), np.stack([m, b], 1)])
     return (np.vstack([fe[~hit], np.sort(new, axis=1)]),
             np.concatenate([fid[~hit], fid[hit], fid[hit]]))
+
+
+def chain_specs(layout, projected) -> list:
+    """The curves to imprint for every member of a resolved layout.
+
+    ``layout``: a :class:`~shellmesh_mdao.layout.Layout`; ``projected``: the result of
+    :func:`~shellmesh_mdao.project.project_layout` (seed points hit on the skin by rays cast
+    from inside the wing). A rib or spar gives an upper and a lower chain between its
+    bounding planes; a full-chord rib (fewer than two spars) one closed loop. Explicit
+    members give one chain per side, each the union of the sections of the planes spanned by
+    a polyline segment and its projection direction.
+    """
+    specs = []
+    for m in layout.members():
+        pm = projected[m.name]
+        if m.kind == "explicit":
+            specs += _explicit_chain_specs(m, pm)
+            continue
+        plane = Plane.make(m.plane_point, m.plane_normal)
+        bounds = tuple(Plane.make(p, n) for p, n in m.bound_planes)
+        mid = len(pm.seeds) // 2
+        if m.kind == "rib" and not bounds:
+            specs.append(ChainSpec(m.name, "loop", plane, (), pm.upper[mid], int(pm.upper_tri[mid])))
+            continue
+        specs.append(ChainSpec(m.name, "upper", plane, bounds, pm.upper[mid], int(pm.upper_tri[mid])))
+        specs.append(ChainSpec(m.name, "lower", plane, bounds, pm.lower[mid], int(pm.lower_tri[mid])))
+    return specs
+
+
+def _explicit_chain_specs(m, pm) -> list:
+    """Explicit member: for each side, one chain piece per polyline segment: the plane through
+    the segment's two projected points containing the projection direction (or, without a
+    direction, the segment's two seeds and projections), bounded by the planes through the
+    segment ends normal to the segment."""
+    out = []
+    for side, seeds, hits, tris, direction in (
+            ("upper", pm.seeds, pm.upper, pm.upper_tri, m.direction),
+            ("lower", pm.lower_seeds if pm.lower_seeds is not None else pm.seeds, pm.lower, pm.lower_tri,
+             m.lower_direction)):
+        for s in range(len(hits) - 1):
+            a, b = hits[s], hits[s + 1]
+            ab = b - a
+            if np.linalg.norm(ab) == 0:
+                raise ImprintError(f"{m.name}: points {s} and {s + 1} of its {side} curve project onto the same "
+                                   "skin point; space the points further apart")
+            if direction is not None:
+                dvec = np.asarray(direction, float)
+            else:
+                dvec = 0.5 * ((hits[s] - seeds[s]) + (hits[s + 1] - seeds[s + 1]))
+            nrm = np.cross(ab, dvec)
+            if np.linalg.norm(nrm) <= 1e-12 * np.linalg.norm(ab) * max(np.linalg.norm(dvec), 1e-300):
+                raise ImprintError(f"{m.name}: segment {s} of its {side} curve is parallel to its projection "
+                                   "direction; choose a direction across the curve")
+            bounds = (Plane.make(a, ab), Plane.make(b, -ab))
+            seed = 0.5 * (a + b)
+            out.append(ChainSpec(m.name, f"{side}_{s}", Plane.make(a, nrm), bounds, seed, -1))
+    return out
+
+
+def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
+    """Name the skin patches the member chains cut out: ``<wing>/upper_skin/bay_<k>`` and
+    ``<wing>/lower_skin/bay_<k>`` (bay k between rib k and rib k+1, between the first and
+    last spar; with fewer than two spars over the whole chord), everything else ``skin``.
+
+    A patch is a set of faces connected across edges that are not member chains. It is a bay
+    when at least 99% of its face centroids lie inside the bay's box (between the two rib
+    planes and, with two or more spars, the first and last spar planes); its faces are then
+    split into upper and lower by their side (along ``up``) of the bay's mid-chord point.
+    """
+    topo = mesh.topology()
+    chain_e = mesh.feature_edges[mesh.feature_edge_ids >= 0]
+    is_chain = np.zeros(len(topo.edges), bool)
+    if len(chain_e):
+        ids = topo.edge_ids(chain_e)
+        is_chain[ids[ids >= 0]] = True
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+
+    man = np.flatnonzero((topo.valence == 2) & ~is_chain)
+    f0 = topo.edge_faces[topo.edge_faces_ptr[man]]
+    f1 = topo.edge_faces[topo.edge_faces_ptr[man] + 1]
+    g = sparse.coo_matrix((np.ones(len(man)), (f0, f1)), shape=(mesh.n_faces, mesh.n_faces))
+    _, patch = connected_components(g, directed=False)
+    cen = mesh.face_centroids()
+    names = list(mesh.component_names)
+    comp = mesh.component.copy()
+    members = {m.name: m for m in layout.members()}
+    for w in layout.wings:
+        up = layout.wing_up(w)
+        ribs = [members[f"{w.name}/rib_{k}"] for k in range(len(w.rib_eta))]
+        spars = [members[f"{w.name}/spar_{j}"] for j in range(len(w.spar_chord))]
+        cmid = 0.5 * (w.spar_chord[0] + w.spar_chord[-1]) if len(spars) >= 2 else 0.5
+        for k in range(len(ribs) - 1):
+            # the bay's own mid-chord point: follows dihedral and twist along the span
+            chord_pt = 0.5 * (w.chord_point(w.rib_eta[k], cmid) + w.chord_point(w.rib_eta[k + 1], cmid))
+            inside = (cen - ribs[k].plane_point) @ ribs[k].plane_normal >= 0
+            inside &= (cen - ribs[k + 1].plane_point) @ ribs[k + 1].plane_normal <= 0
+            if len(spars) >= 2:
+                inside &= (cen - spars[0].plane_point) @ spars[0].plane_normal >= 0
+                inside &= (cen - spars[-1].plane_point) @ spars[-1].plane_normal <= 0
+            frac = np.bincount(patch, weights=inside.astype(float)) / np.bincount(patch)
+            box = frac[patch] >= 0.99
+            upper = (cen - chord_pt) @ up >= 0
+            for side, mask in (("upper", box & upper), ("lower", box & ~upper)):
+                if mask.any():
+                    comp[mask] = len(names)
+                    names.append(f"{w.name}/{side}_skin/bay_{k}")
+    return ShellMesh(mesh.points, mesh.faces, comp, names, mesh.fixed_vertices, mesh.feature_edges,
+                     mesh.feature_edge_ids)
