@@ -1,0 +1,165 @@
+"""All-quad subdivision: one Catmull-Clark-type split of every face (no vertex averaging).
+
+A quad ``(a, b, c, d)`` becomes four quads and a triangle ``(a, b, c)`` three quads, using
+one new node at the midpoint of every edge and one at the centroid of every face::
+
+    child k = (corner_k, mid(side k), centroid, mid(side k-1))
+
+(side ``k`` joins corner ``k`` to the next corner), so every child runs the same way as
+its parent and the children of neighbouring faces share the edge midpoints. The mesh is
+processed as a whole: an edge with three or four faces (skin/member junction, member
+crossing) gets ONE midpoint shared by all of them, so the result stays conforming.
+
+New nodes get supports (:class:`~shellmesh_mdao.smooth.Supports`) and are projected onto
+them: the midpoint of a feature edge with a curve slides on that curve; the midpoint of
+any other edge whose faces all lie on one support (the skin surface, or one member plane)
+takes that support; the centroid of a face takes its face's support. Skin nodes are
+projected onto the ORIGINAL input surface (closest point restricted to triangles facing
+the same way as the local faces, so nodes near a thin trailing edge never land on the
+opposite skin), member nodes onto their plane, curve nodes onto their curve. Midpoints
+of feature edges without a curve, and of edges between faces of different supports
+that are not feature edges, are FIXED (projected onto the faces' support when there is
+one, else left at the straight midpoint).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import MeshValidationError
+from .mesh import ShellMesh
+from .smooth import CURVE, FIXED, Supports
+
+__all__ = ["subdivide_to_quads", "subdivide_faces"]
+
+
+def _unit(a):
+    n = np.linalg.norm(a, axis=1, keepdims=True)
+    return np.divide(a, n, out=np.zeros_like(a), where=n > 0)
+
+
+def subdivide_faces(faces: np.ndarray, face_edges: np.ndarray, n_points: int, n_edges: int):
+    """Connectivity of the subdivision: ``faces`` (m, 4) (-1 in slot 4 for triangles) with
+    their ``face_edges`` (m, 4) edge ids; edge ``e`` gets node ``n_points + e`` and face
+    ``f`` node ``n_points + n_edges + f``. Returns ``(children (4 nq + 3 nt, 4), parent)``,
+    children of each face consecutive, in face order, child k at corner k."""
+    faces = np.asarray(faces, np.int64)
+    m = len(faces)
+    tri = faces[:, 3] < 0
+    k = np.where(tri, 3, 4)
+    parent = np.repeat(np.arange(m), k)
+    start = np.cumsum(k) - k
+    corner = np.arange(len(parent)) - np.repeat(start, k)
+    prev = np.where(tri[parent], (corner + 2) % 3, (corner + 3) % 4)
+    mid = n_points + face_edges
+    cen = n_points + n_edges + parent
+    children = np.stack([faces[parent, corner], mid[parent, corner], cen, mid[parent, prev]], 1)
+    return children, parent
+
+
+def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 0.0,
+                       project: bool = True) -> tuple[ShellMesh, Supports]:
+    """Split every quad into 4 quads and every triangle into 3 quads (whole mesh at once).
+
+    Parameters
+    ----------
+    mesh : conforming mixed mesh (skin and members; non-manifold junction edges allowed).
+    supports : the supports of its vertices (:func:`~shellmesh_mdao.smooth.derive_supports`).
+    min_dot : skin nodes are projected only onto input triangles whose normal has a dot
+        product above this with the local face normal.
+    project : project the new nodes onto their supports (default True).
+
+    Returns ``(quad mesh, supports)``. Node ``i < n`` keeps its index and position; edge
+    ``e`` of ``mesh.topology()`` gets node ``n + e`` and face ``f`` node ``n + E + f``.
+    Children replace their parent in face order and inherit its component; each feature
+    edge becomes two feature edges with the same id, and its midpoint is added to
+    ``fixed_vertices`` (as :mod:`.split` does; the returned supports, not
+    ``fixed_vertices``, decide what the smoother moves).
+    """
+    if not isinstance(mesh, ShellMesh):
+        raise MeshValidationError("subdivide_to_quads needs a ShellMesh; build one with ShellMesh(points, faces)")
+    if not isinstance(supports, Supports) or supports.n != mesh.n_points:
+        raise MeshValidationError("subdivide_to_quads needs Supports with one entry per mesh vertex: build "
+                                  "them with derive_supports(mesh, ...) for this mesh")
+    n, m = mesh.n_points, mesh.n_faces
+    topo = mesh.topology()
+    E = topo.edges
+    ne = len(E)
+    P = mesh.points
+    children, parent = subdivide_faces(mesh.faces, topo.face_edges, n, ne)
+    # ---------------------------------------------------------------- feature edges
+    fe, fid = mesh.feature_edges, mesh.feature_edge_ids
+    fe_e = topo.edge_ids(fe) if len(fe) else np.zeros(0, np.int64)
+    if (fe_e < 0).any():
+        bad = fe[fe_e < 0][:3].tolist()
+        raise MeshValidationError(f"{int((fe_e < 0).sum())} feature edges are not mesh edges (first: {bad}): "
+                                  "feature edges must be edges of the faces; rebuild them after editing faces")
+    fmid = n + fe_e
+    new_fe = np.vstack([np.stack([fe[:, 0], fmid], 1), np.stack([fmid, fe[:, 1]], 1)])
+    new_fid = np.concatenate([fid, fid])
+    fixed = np.union1d(mesh.fixed_vertices, fmid)
+    # ---------------------------------------------------------------- supports of new nodes
+    ck = supports.comp_kind
+    cr = supports.comp_ref
+    if len(ck) < (int(mesh.component.max()) + 1 if m else 0):
+        raise MeshValidationError("supports know fewer components than the mesh has: rebuild them with "
+                                  "derive_supports for this mesh")
+    fkind = ck[mesh.component].astype(np.int64)
+    fref = cr[mesh.component]
+    code = fkind * (int(max(cr.max(initial=0), 0)) + 1) + fref
+    hcode = code[topo.he_face]
+    lo = np.full(ne, np.iinfo(np.int64).max)
+    hi = np.full(ne, np.iinfo(np.int64).min)
+    np.minimum.at(lo, topo.he_edge, hcode)
+    np.maximum.at(hi, topo.he_edge, hcode)
+    uniq = lo == hi
+    # the first face of each edge (all its faces share the support when unique)
+    eface = topo.edge_faces[topo.edge_faces_ptr[:-1]]
+    ekind = np.where(uniq, fkind[eface], FIXED).astype(np.int8)
+    eref = np.where(uniq, fref[eface], -1)
+    ecurve = supports.curve_of_edges(E)
+    is_fe = np.zeros(ne, bool)
+    is_fe[fe_e] = True
+    # open-boundary / non-manifold edges that are not feature edges keep their nodes fixed
+    # (derive_supports), so their midpoints are fixed too
+    is_fe |= topo.valence != 2
+    on_curve = ecurve >= 0
+    # a feature edge without a curve: its midpoint is fixed (on the faces' support if unique)
+    proj_kind = ekind.copy()
+    proj_ref = eref.copy()
+    ekind = np.where(on_curve, CURVE, np.where(is_fe, FIXED, ekind)).astype(np.int8)
+    eref = np.where(on_curve, ecurve, np.where(is_fe, -1, eref))
+    proj_kind = np.where(on_curve, CURVE, proj_kind).astype(np.int8)
+    proj_ref = np.where(on_curve, ecurve, proj_ref)
+    # normals: sum of the incident faces' area vectors
+    av = mesh.face_area_vectors()
+    en = np.zeros((ne, 3))
+    for d in range(3):
+        en[:, d] = np.bincount(topo.he_edge, weights=av[topo.he_face, d], minlength=ne)
+    en = _unit(en)
+    X_mid = 0.5 * (P[E[:, 0]] + P[E[:, 1]])
+    X_cen = mesh.face_centroids()
+    fn = _unit(av)
+    new_kind = np.concatenate([ekind, fkind.astype(np.int8)])
+    new_ref = np.concatenate([eref, fref])
+    X_new = np.vstack([X_mid, X_cen])
+    if project and len(X_new):
+        pk = np.concatenate([proj_kind, fkind.astype(np.int8)])
+        pr = np.concatenate([proj_ref, fref])
+        nrm = np.vstack([en, fn])
+        x, ok = supports.project_kind(X_new, pk, pr, nrm, min_dot)
+        # a skin node without a compatible triangle nearby: plain closest point
+        if (~ok).any():
+            bad = np.flatnonzero(~ok)
+            x[bad], _ = supports.project_kind(X_new[bad], pk[bad], pr[bad], None)
+        X_new = np.where((pk == FIXED)[:, None], X_new, x)
+    sup = supports.extended(new_kind, new_ref)
+    # feature edges of the new mesh with their curves
+    ec_old = supports.curve_of_edges(fe)
+    sup.edge_pairs = np.sort(new_fe, axis=1)
+    sup.edge_curve = np.concatenate([ec_old, ec_old])
+    out = ShellMesh(np.vstack([P, X_new]), children, mesh.component[parent], list(mesh.component_names),
+                    fixed, new_fe, new_fid)
+    # keep supports' feature-edge table aligned with the mesh's (sorted, unique) table
+    sup.edge_curve = sup.curve_of_edges(out.feature_edges)
+    sup.edge_pairs = out.feature_edges.copy()
+    return out, sup

@@ -1,0 +1,138 @@
+"""All-quad subdivision: hand-computed splits, shared midpoints on non-manifold edges,
+supports and projection of the new nodes, feature edges, conformity and determinism."""
+import numpy as np
+import pytest
+
+from shellmesh_mdao.errors import MeshValidationError
+from shellmesh_mdao.geometry import naca_wing
+from shellmesh_mdao.mesh import ShellMesh
+from shellmesh_mdao.project import SurfaceLocator
+from shellmesh_mdao.quad import subdivide_to_quads
+from shellmesh_mdao.quality import scaled_jacobian
+from shellmesh_mdao.smooth import (CURVE, FIXED, PLANE, SURFACE, Supports, derive_supports, mesh_figures,
+                                   polylines_from_edges)
+
+SQ = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+FLAT = SurfaceLocator(SQ * 4 - [1.5, 1.5, 0], [[0, 1, 2], [0, 2, 3]])
+
+
+def _sides(m, f):
+    q = m.points[m.faces[f]]
+    return np.linalg.norm(np.roll(q, -1, 0) - q, axis=1)
+
+
+def test_square_splits_into_four_equal_squares():
+    mesh = ShellMesh(SQ, [[0, 1, 2, 3]])
+    out, sup = subdivide_to_quads(mesh, derive_supports(mesh, FLAT))
+    assert out.n_faces == 4 and out.n_tris == 0 and out.n_points == 9
+    # old nodes keep index and position; edges (sorted pairs) then the centroid follow
+    assert np.array_equal(out.points[:4], SQ)
+    edges = mesh.edges()
+    assert np.allclose(out.points[4:8], 0.5 * (SQ[edges[:, 0]] + SQ[edges[:, 1]]))
+    assert np.allclose(out.points[8], [0.5, 0.5, 0])
+    for f in range(4):
+        assert np.allclose(_sides(out, f), 0.5)                              # side 0.5
+        assert out.faces[f, 0] == f                                          # child k at corner k
+    assert np.allclose(out.face_normals(), [0, 0, 1])                        # orientation kept
+    assert np.allclose(out.face_areas(), 0.25)
+    assert np.allclose(scaled_jacobian(out.points, out.faces), 1.0)
+    assert out.check().ok
+    fig = mesh_figures(out, size=0.5)
+    assert fig["quad_fraction"] == 1.0 and fig["angles_ok"] == 1.0 and fig["n_sj_le_0.2"] == 0
+    assert fig["min_sj"] == pytest.approx(1.0) and fig["warp_p99"] == pytest.approx(0.0, abs=1e-9)
+    assert fig["median_edge_ratio"] == pytest.approx(1.0)
+    # open boundary: corners and boundary midpoints fixed, centroid on the surface
+    assert sup.kind[:8].tolist() == [FIXED] * 8 and sup.kind[8] == SURFACE
+
+
+def test_triangle_splits_into_three_convex_quads_of_equal_area():
+    P = np.array([[0, 0, 0], [2, 0, 0], [0.5, 1.5, 0]], float)
+    mesh = ShellMesh(P, [[0, 1, 2, -1]])
+    out, _ = subdivide_to_quads(mesh, derive_supports(mesh, FLAT))
+    assert out.n_faces == 3 and out.n_quads == 3 and out.n_points == 7
+    assert np.allclose(out.points[6], P.mean(0))
+    area = 0.5 * np.linalg.norm(np.cross(P[1] - P[0], P[2] - P[0]))
+    assert np.allclose(out.face_areas(), area / 3)                            # centroid split: A/3 each
+    assert (scaled_jacobian(out.points, out.faces) > 0.3).all()              # all convex
+    assert np.allclose(out.face_normals(), [0, 0, 1])
+    assert sorted(out.faces[:, 0].tolist()) == [0, 1, 2]
+    assert out.check().ok
+
+
+def _t_junction():
+    """Two skin quads on z=0 sharing edge (1,4) with a vertical member quad (plane x=1):
+    the edge (1,4) has three faces and is a feature edge of the member (id 1)."""
+    P = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0],
+                  [1, 0, -1], [1, 1, -1]], float)
+    F = [[0, 1, 4, 3], [1, 2, 5, 4], [1, 4, 7, 6]]
+    return ShellMesh(P, F, [0, 0, 1], ["skin", "rib"], feature_edges=[[1, 4]], feature_edge_ids=[1])
+
+
+def test_t_junction_shares_one_midpoint():
+    mesh = _t_junction()
+    assert mesh.topology().valence.max() == 3
+    line = np.array([[1, -1, 0], [1, 2, 0]], float)
+    sup = derive_supports(mesh, FLAT, planes={1: ([1, 0, 0], [1, 0, 0])}, curves={1: line})
+    out, osup = subdivide_to_quads(mesh, sup)
+    assert out.n_faces == 12 and out.n_quads == 12
+    # one new node at (1, 0.5, 0) used by the children of all three faces
+    mid = np.flatnonzero(np.all(np.isclose(out.points, [1, 0.5, 0]), axis=1))
+    assert len(mid) == 1
+    users = np.unique(np.flatnonzero((out.faces == mid[0]).any(1)) // 4)
+    assert users.tolist() == [0, 1, 2]
+    assert osup.kind[mid[0]] == CURVE                                        # slides on the junction
+    # feature edge split in two with the same id; its midpoint is fixed like split.py does
+    assert sorted(out.feature_edges.tolist()) == sorted([[1, mid[0]], [4, mid[0]]])
+    assert out.feature_edge_ids.tolist() == [1, 1] and mid[0] in out.fixed_vertices
+    assert out.component.tolist() == [0] * 8 + [1] * 4
+    c = out.check()
+    assert c.ok, c.problems()
+    assert out.topology().valence.max() == 3 and (out.topology().valence == 3).sum() == 2
+    # member centroid on the member plane, member edge midpoints in it too
+    assert osup.kind[out.faces[8:, 2]].tolist() == [PLANE] * 4
+    assert np.allclose(out.points[np.unique(out.faces[out.component == 1])][:, 0], 1.0)
+
+
+def test_new_nodes_projected_onto_curved_skin_and_features():
+    """NACA wing: new skin nodes lie on the input surface (within 1e-9 x diagonal) and on the
+    side the faces face (never on the opposite skin at the thin trailing edge); the new
+    trailing-edge nodes lie on the trailing-edge polyline."""
+    wing = naca_wing(span=2.0, root_chord=1.0, tip_chord=0.6, naca="0005", n_chord=12, n_span=6)
+    loc = SurfaceLocator(wing.points, wing.faces[:, :3])
+    tm_edges = wing.edges()
+    fn = wing.face_normals()
+    topo = wing.topology()
+    assert (topo.valence == 2).all()
+    f = topo.edge_faces.reshape(-1, 2)
+    dih = np.degrees(np.arccos(np.clip((fn[f[:, 0]] * fn[f[:, 1]]).sum(1), -1, 1)))
+    fe = tm_edges[dih > 30]
+    mesh = ShellMesh(wing.points, wing.faces, feature_edges=fe)
+    polys = polylines_from_edges(mesh.points, fe)
+    sup = derive_supports(mesh, loc, curves={-1: [(mesh.points[ix], cl) for ix, cl in polys]})
+    assert sup.counts()["curve"] > 0
+    out, osup = subdivide_to_quads(mesh, sup)
+    assert out.n_tris == 0 and out.check().ok
+    d = osup.distance(out.points)
+    assert d.max() <= 1e-9 * out.diagonal
+    new = np.arange(mesh.n_points, out.n_points)
+    cl, tri, dist = loc.closest(out.points[new])
+    assert dist.max() <= 1e-9 * out.diagonal
+    # the input triangle under each new node faces the same way as the faces around it
+    vn = out.vertex_normals()[new]
+    tn = np.cross(*(loc.points[loc.triangles[tri, k]] - loc.points[loc.triangles[tri, 0]] for k in (1, 2)))
+    assert ((vn * tn).sum(1) > 0).mean() > 0.99
+    # trailing edge midpoints: on the curve
+    on_curve = new[osup.kind[new] == CURVE]
+    assert len(on_curve) and osup.distance(out.points)[on_curve].max() <= 1e-12 * out.diagonal
+
+
+def test_deterministic_and_errors():
+    mesh = _t_junction()
+    line = np.array([[1, -1, 0], [1, 2, 0]], float)
+    sup = derive_supports(mesh, FLAT, planes={1: ([1, 0, 0], [1, 0, 0])}, curves={1: line})
+    a, sa = subdivide_to_quads(mesh, sup)
+    b, sb = subdivide_to_quads(mesh, sup)
+    assert a.points.tobytes() == b.points.tobytes() and np.array_equal(a.faces, b.faces)
+    assert np.array_equal(sa.kind, sb.kind) and np.array_equal(sa.ref, sb.ref)
+    with pytest.raises(MeshValidationError, match="one entry per mesh vertex"):
+        subdivide_to_quads(mesh, Supports(np.zeros(3, np.int8), -np.ones(3)))

@@ -1,0 +1,274 @@
+"""Smoothing QP (paper eq. 6-8): supports derived from a mesh, vertices kept on their
+plane / surface / curve, the null-space solve equal to the literal KKT system, fold
+prevention, determinism, and quality on merged + subdivided corpus skins."""
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from shellmesh_mdao.errors import MeshValidationError
+from shellmesh_mdao.merge import merge_triangles
+from shellmesh_mdao.mesh import ShellMesh
+from shellmesh_mdao.project import SurfaceLocator
+from shellmesh_mdao.quad import subdivide_to_quads
+from shellmesh_mdao.quality import scaled_jacobian
+from shellmesh_mdao.smooth import (CURVE, FIXED, PLANE, SURFACE, Curve, Supports, derive_supports,
+                                   polylines_from_edges, smooth)
+
+
+def grid(nx, ny, x0=0.0, y0=0.0, sx=1.0, sy=1.0):
+    x, y = np.meshgrid(x0 + np.linspace(0, sx, nx + 1), y0 + np.linspace(0, sy, ny + 1), indexing="ij")
+    P = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
+    idx = np.arange(len(P)).reshape(nx + 1, ny + 1)
+    F = np.stack([idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()], 1)
+    return P, F, idx
+
+
+def t_mesh(seed=0, jitter=0.25):
+    """Skin: a 6x4 quad grid on the curved surface z = 0.2 sin(x) over [0,3]x[0,2]; member:
+    a 6x3 quad grid in the plane y = 1, below the skin, joined along the skin line y = 1
+    (a chain of feature edges with the member's id 1). Interior nodes jittered."""
+    rng = np.random.default_rng(seed)
+    Ps, Fs, ids = grid(6, 4, sx=3.0, sy=2.0)
+    Pm, Fm, idm = grid(6, 3, sx=3.0, sy=1.0)
+    Pm = np.stack([Pm[:, 0], np.ones(len(Pm)), Pm[:, 1] - 1.0], 1)        # plane y = 1, z in [-1, 0]
+    # member top row = skin row j=2 (y = 1)
+    Pm[idm[:, -1]] = Ps[ids[:, 2]]
+    P = np.vstack([Ps, Pm])
+    off = len(Ps)
+    Fm = Fm + off
+    remap = np.arange(len(P))
+    remap[idm[:, -1] + off] = ids[:, 2]
+    Fm = remap[Fm]
+    # jitter interior nodes in their own surface, then put the skin on z = 0.2 sin x
+    inner_s = ids[1:-1, 1:-1].ravel()
+    P[inner_s, :2] += rng.uniform(-jitter, jitter, (len(inner_s), 2)) * 0.5
+    inner_m = (idm[1:-1, 1:-1] + off).ravel()
+    P[inner_m, [0]] += rng.uniform(-jitter, jitter, len(inner_m)) * 0.5
+    P[inner_m, 2] += rng.uniform(-jitter, jitter, len(inner_m)) * 0.3
+    chain = ids[:, 2]
+    P[chain, 1] = 1.0                                                      # chain stays in the member plane
+    skin_nodes = np.arange(len(Ps))
+    P[skin_nodes, 2] = 0.2 * np.sin(P[skin_nodes, 0])
+    fe = np.stack([chain[:-1], chain[1:]], 1)
+    mesh = ShellMesh(P, np.vstack([Fs, Fm]), np.r_[np.zeros(len(Fs)), np.ones(len(Fm))].astype(int),
+                     ["skin", "rib"], fixed_vertices=chain, feature_edges=fe, feature_edge_ids=np.ones(len(fe)))
+    mesh, _ = mesh.compact()
+    # input skin: a fine triangulation of the same surface; the junction curve: exact arc
+    u, v = np.meshgrid(np.linspace(-0.5, 3.5, 81), np.linspace(-0.5, 2.5, 61), indexing="ij")
+    sp = np.stack([u.ravel(), v.ravel(), 0.2 * np.sin(u.ravel())], 1)
+    k = np.arange(81 * 61).reshape(81, 61)
+    a, b, c, d = k[:-1, :-1].ravel(), k[1:, :-1].ravel(), k[1:, 1:].ravel(), k[:-1, 1:].ravel()
+    loc = SurfaceLocator(sp, np.vstack([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]))
+    t = np.linspace(-0.5, 3.5, 2001)
+    arc = np.stack([t, np.ones_like(t), 0.2 * np.sin(t)], 1)
+    return mesh, loc, {1: ([0, 1, 0], [0, 1, 0])}, {1: arc}
+
+
+def test_derive_supports_kinds():
+    mesh, loc, planes, curves = t_mesh()
+    sup = derive_supports(mesh, loc, planes, curves, sliding=True)
+    P = mesh.points
+    chain = np.unique(mesh.feature_edges)
+    ends = chain[np.isin(P[chain, 0], [0.0, 3.0])]
+    assert sup.kind[ends].tolist() == [FIXED, FIXED]                       # chain ends (1 feature edge)
+    assert (sup.kind[np.setdiff1d(chain, ends)] == CURVE).all()            # 5 sliding chain nodes
+    skin_only = np.setdiff1d(np.unique(mesh.faces[mesh.component == 0]), np.unique(mesh.faces[mesh.component == 1]))
+    boundary = np.unique(mesh.boundary_edges())
+    assert (sup.kind[np.setdiff1d(skin_only, boundary)] == SURFACE).all()
+    member_inner = np.setdiff1d(np.unique(mesh.faces[mesh.component == 1]), np.r_[chain, boundary])
+    assert len(member_inner) == 10 and (sup.kind[member_inner] == PLANE).all()
+    assert (sup.kind[boundary] == FIXED).all()                              # open boundary stays
+    # without sliding, imprint-fixed chain vertices stay fixed
+    assert (derive_supports(mesh, loc, planes, curves).kind[chain] == FIXED).all()
+    # skin components need a surface
+    with pytest.raises(MeshValidationError, match="no skin surface"):
+        derive_supports(mesh, None, planes, curves)
+
+
+def test_smoothing_keeps_every_vertex_on_its_support_and_improves():
+    mesh, loc, planes, curves = t_mesh()
+    sup = derive_supports(mesh, loc, planes, curves, sliding=True)
+    # start on the supports (the input skin is a faceted version of z = 0.2 sin x)
+    mesh.points = sup.project(mesh.points)[0]
+    tol = 1e-9 * mesh.diagonal
+    assert sup.distance(mesh.points).max() <= tol
+    out, res = smooth(mesh, sup, iterations=15)
+    assert res.iterations >= 1 and res.max_move > 0
+    d = sup.distance(out.points)
+    assert d.max() <= tol
+    moved = np.linalg.norm(out.points - mesh.points, axis=1)
+    assert (moved[sup.kind == FIXED] == 0).all()
+    assert (moved[sup.kind == CURVE] > 0).any()                             # chain nodes slid
+    # the member interior stays in y = 1, chain nodes stay on the arc (y = 1, z = 0.2 sin x)
+    assert np.allclose(out.points[sup.kind == PLANE, 1], 1.0, atol=tol)
+    c = out.points[sup.kind == CURVE]
+    assert np.allclose(c[:, 2], 0.2 * np.sin(c[:, 0]), atol=1e-5)          # polyline chord error only
+    assert res.quality_after["mean_sj"] > res.quality_before["mean_sj"]
+    assert res.quality_after["min_sj"] >= min(res.quality_before["min_sj"], 0.3) - 1e-12
+    # subdivide then smooth: still on the supports, all quads, conforming
+    q, qs = subdivide_to_quads(out, sup)
+    assert qs.distance(q.points).max() <= tol
+    q2, r2 = smooth(q, qs, iterations=10)
+    assert qs.distance(q2.points).max() <= tol
+    assert q2.n_tris == 0 and q2.check().ok
+    assert r2.quality_after["mean_sj"] >= r2.quality_before["mean_sj"]
+
+
+def test_nullspace_solve_equals_literal_kkt_system():
+    """One step with a big trust radius: the reduced (null-space) system and eq. 8 as a
+    KKT matrix [[B, A^T], [A, 0]] give the same displacement."""
+    mesh, loc, planes, curves = t_mesh(seed=3)
+    sup = derive_supports(mesh, loc, planes, curves, sliding=True)
+    kw = dict(iterations=1, trust=1e6, min_jacobian=-10.0, max_halvings=0)
+    a, _ = smooth(mesh, sup, solver="lu", **kw)
+    b, _ = smooth(mesh, sup, solver="kkt", **kw)
+    c, _ = smooth(mesh, sup, solver="cg", **kw)
+    assert np.abs(a.points - mesh.points).max() > 1e-3
+    assert np.allclose(a.points, b.points, atol=1e-9)
+    assert np.allclose(a.points, c.points, atol=1e-7)
+
+
+def _notched_grid():
+    """A 6x6 grid whose top side is a deep V notch: the harmonic (sum of squared lengths)
+    optimum of the interior nodes folds elements near the notch."""
+    P, F, idx = grid(6, 6)
+    x = P[idx[:, -1], 0]
+    P[idx[:, -1], 1] = 1 - 0.9 * (1 - np.abs(2 * x - 1))
+    for i in range(7):
+        col = idx[i]
+        P[col, 1] = P[col[0], 1] + np.linspace(0, 1, 7) * (P[col[-1], 1] - P[col[0], 1])
+    mesh = ShellMesh(P, F)
+    kind = np.full(len(P), PLANE, np.int8)
+    ref = np.zeros(len(P), np.int64)
+    bnd = np.unique(mesh.boundary_edges())
+    kind[bnd], ref[bnd] = FIXED, -1
+    return mesh, Supports(kind, ref, planes=[[[0, 0, 0], [0, 0, 1]]], comp_kind=[PLANE], comp_ref=[0])
+
+
+def test_fold_prevention():
+    mesh, sup = _notched_grid()
+    sj0 = scaled_jacobian(mesh.points, mesh.faces)
+    assert sj0.min() > 0.4
+    kw = dict(energy="squared", ortho_weight=0.0, trust=50.0, reg=0.0, iterations=10)
+    unguarded, _ = smooth(mesh, sup, min_jacobian=-2.0, **kw)              # guard never triggers
+    assert (scaled_jacobian(unguarded.points, unguarded.faces) <= 0).any()  # the QP step folds
+    out, res = smooth(mesh, sup, min_jacobian=0.3, **kw)
+    sj = scaled_jacobian(out.points, out.faces)
+    assert res.n_fold_hits > 0 and res.n_step_halvings > 0
+    assert (sj > 0).all() and (sj >= np.minimum(sj0, 0.3) - 1e-12).all()
+    # default settings on the same input: no fold either, and better on average
+    out2, _ = smooth(mesh, sup)
+    sj2 = scaled_jacobian(out2.points, out2.faces)
+    assert sj2.min() >= min(sj0.min(), 0.3) - 1e-12 and sj2.mean() > sj0.mean()
+
+
+def test_deterministic_and_input_checks():
+    mesh, loc, planes, curves = t_mesh(seed=1)
+    sup = derive_supports(mesh, loc, planes, curves, sliding=True)
+    a, ra = smooth(mesh, sup, iterations=5)
+    b, rb = smooth(mesh, sup, iterations=5)
+    assert a.points.tobytes() == b.points.tobytes()
+    assert ra.n_step_halvings == rb.n_step_halvings
+    assert np.array_equal(a.faces, mesh.faces) and np.array_equal(a.feature_edges, mesh.feature_edges)
+    with pytest.raises(MeshValidationError, match="one entry per mesh vertex"):
+        smooth(mesh, Supports(np.zeros(2, np.int8), -np.ones(2)))
+    with pytest.raises(ValueError, match="energy"):
+        smooth(mesh, sup, energy="bogus")
+
+
+def test_curve_and_polylines():
+    c = Curve(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0]], float))
+    x, d, t = c.closest(np.array([[0.5, 0.2, 0], [1.3, 0.5, 0], [2, 2, 0]]))
+    assert np.allclose(x, [[0.5, 0, 0], [1, 0.5, 0], [1, 1, 0]])
+    assert np.allclose(d, [0.2, 0.3, np.sqrt(2)])
+    assert np.allclose(t, [[1, 0, 0], [0, 1, 0], [0, 1, 0]])
+    # chains break at degree != 2 nodes; a loop is reported closed
+    edges = np.array([[0, 1], [1, 2], [2, 3], [2, 4], [5, 6], [6, 7], [7, 5]])
+    pl = polylines_from_edges(np.zeros((8, 3)), edges)
+    got = sorted((tuple(ix.tolist()), cl) for ix, cl in pl)
+    assert got == [((0, 1, 2), False), ((2, 3), False), ((2, 4), False), ((5, 6, 7), True)]
+
+
+# ------------------------------------------------------------------ corpus skins
+def _corpus_quads(geometry_dir, name, feature_deg=30.0):
+    tm = trimesh.load(geometry_dir / f"{name}.stl", process=True)
+    fe = tm.face_adjacency_edges[np.degrees(tm.face_adjacency_angles) > feature_deg]
+    mesh = ShellMesh(tm.vertices, tm.faces, feature_edges=fe)
+    loc = SurfaceLocator(tm.vertices, tm.faces)
+    curves = {-1: [(mesh.points[ix], cl) for ix, cl in polylines_from_edges(mesh.points, fe)]}
+    merged, _ = merge_triangles(mesh)
+    sup = derive_supports(merged, loc, curves=curves)
+    q, qs = subdivide_to_quads(merged, sup)
+    return q, qs, loc
+
+
+def _check_corpus(q, qs, loc, out, res):
+    tol = 1e-9 * q.diagonal
+    assert out.n_tris == 0 and out.check().ok
+    assert qs.distance(out.points).max() <= tol
+    assert loc.closest(out.points)[2].max() <= tol                          # on the ORIGINAL input
+    qb, qa = res.quality_before, res.quality_after
+    assert qa["quad_fraction"] == 1.0
+    assert qa["mean_sj"] >= qb["mean_sj"] - 1e-3
+    assert qa["n_sj_le_0.2"] <= qb["n_sj_le_0.2"]                           # no new bad elements
+    assert qa["min_sj"] >= min(qb["min_sj"], 0.3) - 1e-9
+    print({k: round(v, 4) for k, v in qa.items()}, f"{res.seconds:.1f}s")
+
+
+def test_corpus_straight_wing(geometry_dir):
+    q, qs, loc = _corpus_quads(geometry_dir, "straight_wing")
+    out, res = smooth(q, qs, iterations=10)
+    _check_corpus(q, qs, loc, out, res)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["bwb", "swept_wing", "cessna210"])
+def test_corpus_all(geometry_dir, name):
+    q, qs, loc = _corpus_quads(geometry_dir, name)
+    out, res = smooth(q, qs)
+    _check_corpus(q, qs, loc, out, res)
+    assert res.quality_after["mean_sj"] > res.quality_before["mean_sj"]
+
+
+@pytest.mark.slow
+def test_timing_100k(geometry_dir):
+    q, qs, loc = _corpus_quads(geometry_dir, "swept_wing")
+    t = time.perf_counter()
+    q2, qs2 = subdivide_to_quads(q, qs)
+    t_sub = time.perf_counter() - t
+    assert q2.n_faces > 100_000
+    out, res = smooth(q2, qs2, iterations=10)
+    print(f"subdivide {t_sub:.2f}s, smooth {res.seconds:.1f}s for {q2.n_faces} quads")
+    _check_corpus(q2, qs2, loc, out, res)
+
+
+def test_thin_trailing_edge_never_jumps_to_the_opposite_skin():
+    """A 5 %-thick NACA 0005 wing (sharp trailing edge as a feature curve): after
+    subdivision and smoothing every skin node lies on the input surface on a triangle that
+    faces the same way as the mesh around it, and the trailing-edge nodes stay on the edge."""
+    from shellmesh_mdao.geometry import naca_wing
+    wing = naca_wing(span=2.0, root_chord=1.0, tip_chord=0.6, naca="0005", n_chord=24, n_span=12)
+    loc = SurfaceLocator(wing.points, wing.faces[:, :3])
+    fn = wing.face_normals()
+    topo = wing.topology()
+    f = topo.edge_faces.reshape(-1, 2)
+    fe = topo.edges[(fn[f[:, 0]] * fn[f[:, 1]]).sum(1) < np.cos(np.radians(30))]
+    mesh = ShellMesh(wing.points, wing.faces, feature_edges=fe)
+    curves = {-1: [(mesh.points[ix], cl) for ix, cl in polylines_from_edges(mesh.points, fe)]}
+    merged, _ = merge_triangles(mesh)
+    sup = derive_supports(merged, loc, curves=curves)
+    q, qs = subdivide_to_quads(merged, sup)
+    out, res = smooth(q, qs, iterations=10)
+    tol = 1e-9 * out.diagonal
+    assert qs.distance(out.points).max() <= tol
+    surf = np.flatnonzero(qs.kind == SURFACE)
+    _, tri, dist = loc.closest(out.points[surf])
+    assert dist.max() <= tol
+    t = loc.triangles[tri]
+    tn = np.cross(loc.points[t[:, 1]] - loc.points[t[:, 0]], loc.points[t[:, 2]] - loc.points[t[:, 0]])
+    vn = out.vertex_normals()[surf]
+    assert ((tn * vn).sum(1) > 0).all()
+    assert (scaled_jacobian(out.points, out.faces) > 0).all()
+    assert res.quality_after["n_sj_le_0.2"] <= res.quality_before["n_sj_le_0.2"]
