@@ -269,8 +269,6 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     has_pos = (s > 0).any(1)
     has_neg = (s < 0).any(1)
     split = has_pos & has_neg
-    # chain edges along existing edges: two zero vertices in a region face
-    zero_pair_faces = (s == 0).sum(1) >= 2
     # crossing points on edges with strictly opposite signs (unique edges)
     fs = rt[split]
     ss = s[split]

@@ -348,7 +348,6 @@ def polylines_from_edges(points, edges) -> list:
     # duplicate every break node once per incident edge, so components are simple paths/cycles
     k = len(e)
     he_node = e.ravel()                                    # half-edge endpoints, edge id = i // 2
-    he_edge = np.repeat(np.arange(k), 2)
     node_id = np.where(brk[he_node], n + np.arange(2 * k), he_node)
     g = sparse.coo_matrix((np.ones(k), (node_id[0::2], node_id[1::2])), shape=(n + 2 * k, n + 2 * k)).tocsr()
     g = ((g + g.T) > 0).astype(np.int8).tocsr()

