@@ -38,7 +38,7 @@ from .errors import OutputError, ShellMeshError
 from .mesh import ShellMesh
 
 __all__ = [
-    "write_mesh", "export_order", "resolve_thickness", "resolve_material", "inp_mesh_lines",
+    "write_mesh", "check_output_path", "write_text_atomic", "export_order", "resolve_thickness", "resolve_material", "inp_mesh_lines",
     "inp_elset_names", "bdf_family_name", "DEFAULT_THICKNESS", "DEFAULT_MATERIAL", "OUTPUT_FORMATS",
 ]
 
@@ -215,7 +215,7 @@ def _umask() -> int:
     return old
 
 
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
+def _check_folder(path: Path) -> None:
     folder = path.parent
     if not folder.exists():
         raise OutputError(f"cannot write {path}: folder {folder} does not exist; create it first "
@@ -226,12 +226,41 @@ def _atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
     if path.is_dir():
         raise OutputError(f"cannot write {path}: it is an existing folder; give a file name ending in "
                           f"one of {sorted(OUTPUT_FORMATS)}")
+
+
+def _temp_in(path: Path) -> str:
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         os.close(fd)
     except OSError as e:
-        raise OutputError(f"cannot write {path}: folder {folder} is not writable ({e.strerror}); "
+        raise OutputError(f"cannot write {path}: folder {path.parent} is not writable ({e.strerror}); "
                           "choose a writable folder or fix its permissions") from None
+    return tmp_name
+
+
+def check_output_path(path, formats=None) -> Path:
+    """Fail early, before any work, when ``path`` cannot be written: missing or read-only
+    folder, a folder given as the file, or (with ``formats``, default the mesh formats) an
+    unsupported extension. Probes writability with a temporary file it removes."""
+    path = Path(path)
+    formats = OUTPUT_FORMATS if formats is None else formats
+    if formats and path.suffix.lower() not in formats:
+        raise OutputError(f"cannot write {path.name}: unknown output extension {path.suffix or '(none)'!r}; "
+                          f"use one of {', '.join(sorted(formats))}")
+    _check_folder(path)
+    os.unlink(_temp_in(path))
+    return path
+
+
+def write_text_atomic(path, text: str) -> Path:
+    """Write a text file (a report) atomically: temporary file in the same folder, then rename."""
+    path = Path(path)
+    return _atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def _atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
+    _check_folder(path)
+    tmp_name = _temp_in(path)
     tmp = Path(tmp_name)
     try:
         write(tmp)

