@@ -1,0 +1,1527 @@
+"""Members: triangle meshes of the internal members that share the imprint chains' nodes.
+
+Stage order: load -> layout -> project -> imprint -> **members** -> split -> merge -> smooth -> quad -> export.
+
+Every internal member is a four-sided surface (the paper, Sec. IV.A): its upper and lower
+sides are its imprint chains on the upper and lower skin, its two other sides are junction
+lines with the members it ends on (a rib's lines with the front and rear spar) or straight
+end lines where nothing closes it. The member mesh uses the chain vertices themselves (the
+same point indices as the skin), so skin and member conform by construction.
+
+Junctions between members (found as the skin vertices two members' chains share):
+
+* a **junction line** joins the upper and lower crossing vertex of two members (both are
+  skin vertices on both chains). For planar members it is the straight segment on the
+  intersection line of the two planes (parallel to the wing's ``up`` in a wing box). It is
+  discretised once and the same nodes are used by both members;
+* **T-junction**: the line is at the end of one member's chains (a rib ends on a spar) and
+  inside the other (the spar). The rib closes on it; the spar keeps it as interior edges
+  and stays one component;
+* **X-junction**: the line is inside both members (a rib crosses a middle spar). Both
+  members are split into pieces along it, named ``<member>/seg_<j>`` with ``j`` counted
+  along the member's direction (ribs front to rear, spars root to tip: a middle spar's
+  ``seg_k`` is the bay between rib ``k`` and rib ``k + 1`` when it starts at rib 0). A
+  member with at least one X-junction is split along all its interior junction lines;
+* **L-junction**: the line ends both members (the wing-box corner rib 0 x spar 0).
+
+Before meshing, chains are completed (edges a later cut split get their vertices back),
+crossing vertices are put exactly on both planes, very uneven chain spacing is evened out
+by sliding chain vertices along their exact curves, and chain edges much longer than the
+member is tall are split (with the two skin triangles on them). Each planar member is then
+one constrained Delaunay triangulation of its plane's 2D frame (``triangle``, no Steiner
+point on any chain or junction segment), refined to a size graded from the boundary spacing
+to ``size``, smoothed and pruned for its smallest angle; a non-planar member is meshed in
+the parameter square of a Coons patch of B-spline fits of its four sides.
+
+See ``docs/members.md`` for the method, the numbering of the new nodes and the error
+messages.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import sparse
+from scipy.interpolate import make_interp_spline
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
+
+from .errors import ImprintError, LayoutError, SizeError
+from .mesh import ShellMesh
+from .section import Plane
+
+__all__ = ["MemberInfo", "member_infos", "build_members", "member_statistics", "triangulate_planar",
+           "coons_patch", "DEFAULT_MIN_ANGLE"]
+
+#: Minimum angle (degrees) requested from the constrained Delaunay refinement (``q``).
+DEFAULT_MIN_ANGLE = 30.0
+_EQ_AREA = np.sqrt(3.0) / 4.0
+
+
+# ============================================================================ member description
+@dataclass
+class MemberInfo:
+    """What :func:`build_members` needs per member beyond its chains.
+
+    ``name``          the member's name (``<wing>/rib_<k>``, ``<wing>/spar_<j>`` or an explicit
+                      member's name); its chains (``ChainResult.member``) carry the same name.
+    ``kind``          ``'rib'``, ``'spar'`` or ``'explicit'``.
+    ``plane_point``, ``plane_normal``  the member plane; both None for a non-planar member
+                      (meshed through a Coons patch of its four sides).
+    ``up``            the wing's up vector (informative).
+    ``direction``     the member's running direction (rib: front to rear, spar: root to tip;
+                      ``end - start`` of its defining curve in the layout): orients the chains
+                      and numbers the pieces ``seg_<j>`` along it. None: the upper chain's order.
+    ``wing``, ``index`` owning wing and rib/spar number (None and position for explicit members).
+    """
+
+    name: str
+    kind: str = "explicit"
+    plane_point: np.ndarray | None = None
+    plane_normal: np.ndarray | None = None
+    up: np.ndarray | None = None
+    direction: np.ndarray | None = None
+    wing: str | None = None
+    index: int = 0
+
+    def __post_init__(self):
+        for k in ("plane_point", "plane_normal", "up", "direction"):
+            v = getattr(self, k)
+            if v is not None:
+                v = np.asarray(v, dtype=np.float64).reshape(3)
+                if not np.isfinite(v).all():
+                    raise LayoutError(f"member '{self.name}': {k} {v.tolist()} is not finite; give a finite vector")
+                setattr(self, k, v)
+        if (self.plane_point is None) != (self.plane_normal is None):
+            raise LayoutError(f"member '{self.name}': give both plane_point and plane_normal (or neither for a "
+                              "non-planar member)")
+        if self.plane_normal is not None:
+            n = float(np.linalg.norm(self.plane_normal))
+            if n == 0:
+                raise LayoutError(f"member '{self.name}': plane_normal is the zero vector; give the plane's normal")
+            self.plane_normal = self.plane_normal / n
+
+    @property
+    def is_planar(self) -> bool:
+        return self.plane_normal is not None
+
+    @property
+    def plane(self) -> Plane | None:
+        return Plane(self.plane_point, self.plane_normal) if self.is_planar else None
+
+    @classmethod
+    def from_spec(cls, spec) -> "MemberInfo":
+        """From a :class:`~shellmesh_mdao.layout.MemberSpec` (or anything with its attributes).
+        An explicit member gets no plane here (:func:`build_members` fits one to its imprinted
+        chains when they are coplanar) and runs along its ``upper`` polyline."""
+        kind = getattr(spec, "kind", "explicit")
+        pp, pn = getattr(spec, "plane_point", None), getattr(spec, "plane_normal", None)
+        direction = None
+        start, end = getattr(spec, "start", None), getattr(spec, "end", None)
+        if start is not None and end is not None:
+            direction = np.asarray(end, float) - np.asarray(start, float)
+        if kind == "explicit" and getattr(spec, "upper", None) is not None:
+            up_pts = np.asarray(spec.upper, float).reshape(-1, 3)
+            direction = up_pts[-1] - up_pts[0]
+        return cls(name=spec.name, kind=kind, plane_point=pp, plane_normal=pn, up=getattr(spec, "up", None),
+                   direction=direction, wing=getattr(spec, "wing", None), index=int(getattr(spec, "index", 0) or 0))
+
+
+def _fit_plane(pts: np.ndarray, tol: float):
+    """Least-squares plane of ``pts``: ``(point, normal)``, or ``(None, None)`` when they are
+    not coplanar within ``tol`` times their extent (or are collinear)."""
+    c = pts.mean(0)
+    ext = float(np.linalg.norm(pts.max(0) - pts.min(0)))
+    if ext == 0 or len(pts) < 3:
+        return None, None
+    _, s, vt = np.linalg.svd(pts - c)
+    if s[1] <= 1e-9 * s[0]:
+        return None, None
+    n = vt[2]
+    if np.abs((pts - c) @ n).max() > tol * ext:
+        return None, None
+    return c, n
+
+
+def member_infos(layout) -> list:
+    """:class:`MemberInfo` of every member of a layout (a :class:`~shellmesh_mdao.layout.Layout`,
+    dict or path), in :meth:`~shellmesh_mdao.layout.Layout.members` order."""
+    from .layout import Layout, load_layout
+    lay = layout if isinstance(layout, Layout) else load_layout(layout)
+    return [MemberInfo.from_spec(s) for s in lay.members()]
+
+
+# ============================================================================ small helpers
+def _tri_min_angles(P: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Minimum corner angle (degrees) of each triangle (points of any dimension)."""
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+
+    def ang(u, v):
+        cu = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
+        return np.degrees(np.arccos(np.clip(cu, -1.0, 1.0)))
+
+    return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
+
+
+def _edge_keys(e: np.ndarray, n: int) -> np.ndarray:
+    e = np.sort(np.asarray(e, np.int64).reshape(-1, 2), axis=1)
+    return e[:, 0] * n + e[:, 1]
+
+
+def _line_params(L: float, size: float, h0: float | None = None, h1: float | None = None) -> np.ndarray:
+    """Interior parameters in (0, 1) dividing a line of length ``L`` into pieces of about
+    ``size``, graded (spacing growing by at most 0.3 per unit length) from the end spacings
+    ``h0``/``h1`` when these are smaller, so the first piece at a crossing matches the chain
+    edges meeting there. A line shorter than about ``1.5`` pieces stays one piece."""
+    if L <= 0:
+        return np.zeros(0)
+    h0 = size if h0 is None else min(max(h0, 1e-12 * L), size)
+    h1 = size if h1 is None else min(max(h1, 1e-12 * L), size)
+    # spacing function h(x) = min(size, h0 + g x, h1 + g (L - x)); place nodes at equal steps
+    # of the integral of 1/h (vectorised on a fine sample)
+    g = 0.3
+    x = np.linspace(0.0, L, 2049)
+    h = np.minimum(size, np.minimum(h0 + g * x, h1 + g * (L - x)))
+    w = np.concatenate([[0.0], np.cumsum(0.5 * (1 / h[1:] + 1 / h[:-1]) * np.diff(x))])
+    n = max(1, int(np.round(w[-1])))
+    if n == 1:
+        return np.zeros(0)
+    t = np.interp(np.arange(1, n) * (w[-1] / n), w, x) / L
+    return t
+
+
+# ============================================================================ planar triangulation
+def _sizing_field(x: np.ndarray, seg: np.ndarray, gradation: float):
+    """Element size at points of the plane (units of the target size): the boundary node
+    spacing near the boundary, graded at ``gradation`` towards 1 inside (finer boundary
+    spacing shrinks it, coarser spacing enlarges it near the long edges)."""
+    L = np.linalg.norm(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
+    acc = np.bincount(seg.ravel(), weights=np.repeat(L, 2), minlength=len(x))
+    cnt = np.bincount(seg.ravel(), minlength=len(x))
+    used = cnt > 0
+    xb, hb = x[used], acc[used] / cnt[used]
+    tree = cKDTree(xb)
+    k = int(min(16, len(xb)))
+
+    def h(q):
+        d, i = tree.query(q, k=k)
+        d, i = d.reshape(len(q), -1), i.reshape(len(q), -1)
+        down = (hb[i] + gradation * d).min(1)
+        up = (hb[i] - gradation * d).max(1)
+        return np.maximum(np.minimum(np.maximum(1.0, up), down), 1e-3)
+
+    return h
+
+
+def _cross2(y: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Twice the signed area of each 2D triangle (positive: counter-clockwise)."""
+    p, q, r = y[T[:, 0]], y[T[:, 1]], y[T[:, 2]]
+    return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+
+def _smooth_2d(x: np.ndarray, tris: np.ndarray, seg: np.ndarray, n_fixed: int, iters: int):
+    """Move the free nodes (index >= ``n_fixed``) to improve the smallest angles: each goes to
+    the mean of the apexes that would make its star's opposite edges equilateral; a move is
+    kept only if its star's smallest angle does not drop (and nothing folds). The mesh is
+    re-triangulated (constrained Delaunay, same nodes) after every pass."""
+    import triangle as tr
+
+    free = np.arange(len(x)) >= n_fixed
+    T = tris
+    for _ in range(iters):
+        # opposite edge (a, b) of each corner v, counter-clockwise: ideal apex on v's side
+        v = T.ravel()
+        a = np.roll(T, -1, axis=1).ravel()
+        b = np.roll(T, -2, axis=1).ravel()
+        ab = x[b] - x[a]
+        nrm = np.stack([-ab[:, 1], ab[:, 0]], 1)             # left of a->b: v's side for CCW triangles
+        ideal = 0.5 * (x[a] + x[b]) + nrm * (np.sqrt(3.0) / 2.0)
+        acc = np.zeros_like(x)
+        np.add.at(acc, v, ideal)
+        cnt = np.bincount(v, minlength=len(x))
+        xn = x.copy()
+        mv = free & (cnt > 0)
+        xn[mv] = acc[mv] / cnt[mv, None]
+        a0 = _tri_min_angles(x, T)
+        a1 = np.where(_cross2(xn, T) > 0, _tri_min_angles(xn, T), -1.0)
+        s0 = np.full(len(x), np.inf)
+        s1 = np.full(len(x), np.inf)
+        for c in range(3):
+            np.minimum.at(s0, T[:, c], a0)
+            np.minimum.at(s1, T[:, c], a1)
+        ok = mv & (s1 > s0 + 1e-9)
+        for _ in range(5):                                   # neighbours moving together: re-check
+            y = np.where(ok[:, None], xn, x)
+            ay = np.where(_cross2(y, T) > 0, _tri_min_angles(y, T), -1.0)
+            worse = ay < np.minimum(a0, 90.0) - 1e-9
+            bad = np.unique(T[worse & ok[T].any(1)]) if worse.any() else np.zeros(0, np.int64)
+            # a triangle got worse than it was: refuse the moves of its free corners unless the
+            # triangle's new angle is still above every old star minimum of them
+            if not len(bad):
+                break
+            s_bad = np.zeros(len(x), bool)
+            tri_bad = worse & ok[T].any(1) & (ay < s0[T].min(1) + 1e-9)
+            if not tri_bad.any():
+                break
+            s_bad[T[tri_bad].ravel()] = True
+            ok &= ~s_bad
+        if not ok.any():
+            break
+        y = np.where(ok[:, None], xn, x)
+        t = tr.triangulate({"vertices": y, "segments": seg.astype(np.int32)}, "pYYQ")
+        if len(t["vertices"]) != len(y):                     # (coincident nodes) keep the last good mesh
+            break
+        x, T = y, np.asarray(t["triangles"], np.int64)
+    return x, T
+
+
+def _prune_2d(x, tris, seg, n_fixed, min_angle: float = 30.0, rounds: int = 6, smooth: int = 4):
+    """Remove interior nodes that spoil the smallest angle: the free corners of the worst
+    triangles (within 4 degrees of the smallest angle, and below ``min_angle``; no two
+    adjacent in one round) are deleted, the rest re-triangulated and smoothed; a round is
+    kept only if the mesh's smallest angle improves."""
+    import triangle as tr
+
+    cur = _tri_min_angles(x, tris)
+    for _ in range(rounds):
+        worst = float(cur.min()) if len(cur) else 90.0
+        if worst >= min_angle:
+            break
+        bad = tris[cur < min(min_angle, worst + 4.0)]       # the worst triangles first
+        cand = np.unique(bad[bad >= n_fixed])
+        if not len(cand):
+            break
+        # independent set: drop a candidate if a lower-numbered candidate shares a triangle with it
+        e = np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+        isc = np.zeros(len(x), bool)
+        isc[cand] = True
+        e = e[isc[e[:, 0]] & isc[e[:, 1]]]
+        lose = np.zeros(len(x), bool)
+        lose[np.maximum(e[:, 0], e[:, 1])] = True
+        rm = cand[~lose[cand]]
+        keep = np.ones(len(x), bool)
+        keep[rm] = False
+        y = x[keep]
+        t = tr.triangulate({"vertices": y, "segments": seg.astype(np.int32)}, "pYYQ")
+        if len(t["vertices"]) != len(y):
+            break
+        T = np.asarray(t["triangles"], np.int64)
+        y, T = _smooth_2d(y, T, seg, n_fixed, smooth)
+        new = _tri_min_angles(y, T)
+        if new.min() <= worst:
+            break
+        x, tris, cur = y, T, new
+    return x, tris
+
+
+def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_angle: float = DEFAULT_MIN_ANGLE,
+                       name: str = "member", gradation: float = 0.3, rounds: int = 3,
+                       smooth: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """Constrained Delaunay triangulation of a planar straight-line graph in 2D.
+
+    ``uv`` (n, 2) nodes, ``segments`` (s, 2) node pairs that must be triangle edges (the
+    region is everything enclosed by segments; triangles outside are removed), ``size`` the
+    target edge length and ``min_angle`` the refinement's minimum-angle target (``triangle``'s
+    ``q``). The element size follows the segments' own spacing near them and grades (rate
+    ``gradation``) to ``size`` inside: the maximum area of each triangle is that of the
+    equilateral triangle of the local size, refined in ``rounds`` passes ('r' with per-triangle
+    areas). No Steiner point is put on any segment (``YY``), so every
+    segment is exactly one triangle edge. Returns ``(uv_all, tris)``: the input nodes first
+    (unchanged), then the new interior nodes, and (t, 3) counter-clockwise triangles.
+    Raises :class:`ImprintError` naming ``name`` if a segment is lost (crossing segments) or
+    a node is left outside the region.
+    """
+    import triangle as tr
+
+    uv = np.asarray(uv, np.float64)
+    seg = np.asarray(segments, np.int64).reshape(-1, 2)
+    n = len(uv)
+    o = uv.mean(0)
+    x = (uv - o) / size                                       # target edge length 1
+    sizing = _sizing_field(x, seg, gradation)
+    t = tr.triangulate({"vertices": x, "segments": seg.astype(np.int32)}, "pYYQ")
+    opts = f"rpYYq{float(min_angle):.6f}aQ"
+    for _ in range(rounds):
+        tris = np.asarray(t["triangles"], np.int64)
+        h = sizing(np.asarray(t["vertices"])[tris].mean(1))
+        n_before = len(t["vertices"])
+        t = tr.triangulate({"vertices": t["vertices"], "segments": t["segments"], "triangles": tris,
+                            "triangle_max_area": _EQ_AREA * h * h}, opts)
+        if len(t["vertices"]) == n_before:
+            break
+    tris = np.asarray(t.get("triangles", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+    xo = np.asarray(t["vertices"], np.float64)
+    if smooth and len(xo) > n:
+        xo, tris = _smooth_2d(xo, tris, seg, n, smooth)
+        xo, tris = _prune_2d(xo, tris, seg, n, smooth=smooth)
+    if len(xo) < n or not np.array_equal(xo[:n], x):
+        raise ImprintError(f"{name}: the member triangulation changed its boundary nodes (coincident chain "
+                           "vertices); use a smaller --size")
+    m = len(xo)
+    te = np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    lost = ~np.isin(_edge_keys(seg, m), np.unique(_edge_keys(te, m)))
+    if lost.any():
+        s0 = seg[np.flatnonzero(lost)[0]]
+        raise ImprintError(f"{name}: its boundary or junction segments cross each other near "
+                           f"{np.round(uv[s0[0]], 6).tolist()} (member-plane coordinates), so its outline is not "
+                           "a simple region; move the member so its chains and junction lines do not cross, or "
+                           "use a smaller --size")
+    used = np.zeros(m, bool)
+    used[tris.ravel()] = True
+    if not used[:n].all():
+        bad = np.flatnonzero(~used[:n])[0]
+        raise ImprintError(f"{name}: boundary node at {np.round(uv[bad], 6).tolist()} (member-plane coordinates) "
+                           "is outside the meshed region: the member's outline is not closed; check its chains")
+    a, b, c = xo[tris[:, 0]], xo[tris[:, 1]], xo[tris[:, 2]]
+    cr = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    tris = np.where((cr < 0)[:, None], tris[:, [0, 2, 1]], tris)
+    uv_all = np.vstack([uv, xo[n:] * size + o])
+    return uv_all, tris
+
+
+def _pieces(tris: np.ndarray, segments: np.ndarray, n_nodes: int) -> tuple[int, np.ndarray]:
+    """Connected pieces of a triangulation where crossing a segment is not allowed."""
+    t = len(tris)
+    te = np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    tf = np.tile(np.arange(t), 3)
+    k = _edge_keys(te, n_nodes)
+    blocked = np.isin(k, _edge_keys(segments, n_nodes)) if len(segments) else np.zeros(len(k), bool)
+    k, tf = k[~blocked], tf[~blocked]
+    o = np.argsort(k, kind="stable")
+    k, tf = k[o], tf[o]
+    same = k[1:] == k[:-1]
+    a, b = tf[:-1][same], tf[1:][same]
+    g = sparse.coo_matrix((np.ones(len(a)), (a, b)), shape=(t, t))
+    return connected_components(g, directed=False)
+
+
+# ============================================================================ Coons patch
+def coons_patch(lower: np.ndarray, upper: np.ndarray, side0: np.ndarray, side1: np.ndarray):
+    """Transfinite (Coons) interpolation of four boundary polylines fitted by B-splines.
+
+    ``lower`` runs from corner (0,0) to (1,0), ``upper`` from (0,1) to (1,1), ``side0`` from
+    (0,0) to (0,1) and ``side1`` from (1,0) to (1,1) (each (k, 3); corners shared). Each is
+    interpolated by a cubic B-spline (``scipy.interpolate.make_interp_spline``; lower degree
+    for fewer points) in normalised chord length. Returns ``(S, params)``: ``S(s, t)``
+    evaluates the patch at arrays ``s``, ``t`` in [0, 1] and ``params`` are the chord-length
+    parameters of the four polylines' nodes (``S`` reproduces the nodes there).
+    """
+    curves = [np.asarray(c, float) for c in (lower, upper, side0, side1)]
+    ends = [(curves[0][0], curves[2][0]), (curves[0][-1], curves[3][0]), (curves[1][0], curves[2][-1]),
+            (curves[1][-1], curves[3][-1])]
+    for a, b in ends:
+        if not np.array_equal(a, b):
+            raise ImprintError("coons_patch: the four sides do not share their corners; order them as "
+                               "lower (0,0)->(1,0), upper (0,1)->(1,1), side0 (0,0)->(0,1), side1 (1,0)->(1,1)")
+    splines, params = [], []
+    for c in curves:
+        d = np.linalg.norm(np.diff(c, axis=0), axis=1)
+        if not len(d) or (d <= 0).any():
+            raise ImprintError("coons_patch: a side has repeated points or a single point; remove the duplicates")
+        s = np.concatenate([[0.0], np.cumsum(d)]) / d.sum()
+        s[-1] = 1.0
+        splines.append(make_interp_spline(s, c, k=min(3, len(c) - 1)))
+        params.append(s)
+    cl, cu, d0, d1 = splines
+    P00, P10, P01, P11 = curves[0][0], curves[0][-1], curves[1][0], curves[1][-1]
+
+    def S(s, t):
+        s = np.asarray(s, float).reshape(-1)
+        t = np.asarray(t, float).reshape(-1)
+        sc, tc = s[:, None], t[:, None]
+        out = (1 - tc) * cl(s) + tc * cu(s) + (1 - sc) * d0(t) + sc * d1(t)
+        out -= ((1 - sc) * (1 - tc)) * P00 + (sc * (1 - tc)) * P10 + ((1 - sc) * tc) * P01 + (sc * tc) * P11
+        return out
+
+    return S, params
+
+
+# ============================================================================ chains and crossings
+@dataclass
+class _Member:
+    info: MemberInfo
+    upper: np.ndarray | None = None      # ordered chain vertices (open members)
+    lower: np.ndarray | None = None
+    loop: np.ndarray | None = None       # closed chain (full-chord rib)
+    arcs: tuple = ()                     # exact SectionArcs of its chains
+    closing: list = field(default_factory=lambda: [None, None])   # per end: junction index or None
+    interior: list = field(default_factory=list)                  # junction indices inside it
+    end_lines: list = field(default_factory=list)                 # node arrays of its own end lines
+    sides: list = field(default_factory=list)        # two open chains (upper/lower, or a loop's halves)
+    side_arcs: list = field(default_factory=list)    # their exact curves (open polylines or None)
+
+    @property
+    def name(self) -> str:
+        return self.info.name
+
+    def chain_vertices(self) -> np.ndarray:
+        return self.loop if self.loop is not None else np.concatenate([self.upper, self.lower])
+
+    def make_sides(self, P: np.ndarray) -> None:
+        """Two open chains: the upper and lower chain, or a closed chain cut at its extreme
+        points along the member direction (leading and trailing edge of a full-chord rib)."""
+        if self.loop is None:
+            self.sides = [self.upper, self.lower]
+            self.side_arcs = [None if a is None else a.points for a in self.arcs]
+            return
+        lp = self.loop
+        d = self.info.direction
+        X = P[lp] - P[lp].mean(0)
+        if d is None:
+            d = np.linalg.svd(X, full_matrices=False)[2][0]
+        proj = X @ d
+        ia, ib = int(np.argmin(proj)), int(np.argmax(proj))
+        n = len(lp)
+        A = lp[(ia + np.arange((ib - ia) % n + 1)) % n]
+        B = lp[(ib + np.arange((ia - ib) % n + 1)) % n]
+        self.sides = [A, B]
+        arc = self.arcs[0]
+        if arc is None or len(A) < 2 or len(B) < 2:
+            self.side_arcs = [None, None]
+            return
+        s, p, cum = _arc_param(P[[lp[ia], lp[ib]] + [A[len(A) // 2]]], arc.points, True)
+        tot = cum[-1]
+        pp = np.vstack([p[:-1], p[:-1] + 0.0, p[:1]])          # the loop twice (parameters 0 .. 2 tot)
+        cc = np.concatenate([cum[:-1], cum[:-1] + tot, [2 * tot]])
+        s0, s1, sm = s
+        fwd = ((sm - s0) % tot) < ((s1 - s0) % tot)             # A runs with the parameter from s0 to s1
+        a0, a1 = (s0, s0 + (s1 - s0) % tot) if fwd else (s1, s1 + (s0 - s1) % tot)
+        b0, b1 = (a1, a0 + tot)
+        self.side_arcs = [_sub_polyline(pp, cc, a0, a1), _sub_polyline(pp, cc, b0 % tot, b0 % tot + (b1 - b0))]
+
+    def sync_sides(self) -> None:
+        """Write the (possibly refined) sides back into the chains."""
+        if self.loop is None:
+            self.upper, self.lower = self.sides
+        else:
+            A, B = self.sides
+            self.loop = np.concatenate([A, B[1:-1]])
+
+
+@dataclass
+class _Junction:
+    i: int                     # member indices (i < j)
+    j: int
+    vu: int                    # upper and lower crossing vertices
+    vl: int
+    nodes: np.ndarray | None = None      # vu, interior nodes, vl
+    where: dict = field(default_factory=dict)   # member index -> 'end' | 'interior'
+
+    @property
+    def kind(self) -> str:
+        w = sorted(self.where.values())
+        return {("interior", "interior"): "X", ("end", "interior"): "T", ("end", "end"): "L"}[tuple(w)]
+
+
+def _member_feature_graph(skin: ShellMesh, name: str):
+    fe = skin.feature_edges
+    if name in skin.component_names:
+        sel = fe[skin.feature_edge_ids == skin.component_names.index(name)]
+        if len(sel):
+            fe = sel
+    n = skin.n_points
+    g = sparse.coo_matrix((np.ones(len(fe)), (fe[:, 0], fe[:, 1])), shape=(n, n)).tocsr()
+    return (g + g.T).tocsr()
+
+
+def _complete_chain(skin: ShellMesh, verts: np.ndarray, closed: bool, name: str, side: str) -> np.ndarray:
+    """Make every consecutive pair of chain vertices a mesh edge: a chain edge split later by
+    another member's cut (a middle spar crossing a rib) gets its split nodes back, found
+    along the member's feature edges."""
+    v = np.asarray(verts, np.int64)
+    if len(v) < 2:
+        raise ImprintError(f"member '{name}': its {side} chain has {len(v)} vertex; re-run the imprint")
+    pairs = np.stack([v, np.roll(v, -1)], 1) if closed else np.stack([v[:-1], v[1:]], 1)
+    ok = skin.topology().edge_ids(pairs) >= 0
+    if ok.all():
+        return v
+    g = _member_feature_graph(skin, name)
+    out = [v[:1]]
+    for i, (a, b) in enumerate(pairs):          # loop over the few missing pairs' neighbours
+        if ok[i]:
+            out.append(np.asarray([b], np.int64))
+            continue
+        dist, pred = dijkstra(g, directed=False, indices=int(a), unweighted=True, limit=16,
+                              return_predecessors=True)
+        if not np.isfinite(dist[b]):
+            raise ImprintError(f"member '{name}': its {side} chain is broken between skin vertices {a} and {b} "
+                               "(no mesh edge joins them); imprint this member again, or use a smaller --size")
+        path = [int(b)]
+        while path[-1] != a:
+            path.append(int(pred[path[-1]]))
+        out.append(np.asarray(path[::-1][1:], np.int64))
+    w = np.concatenate(out)
+    return w[:-1] if closed else w
+
+
+def _exact_crossing(P, v, mem: _Member, other: MemberInfo):
+    """Point where ``mem``'s exact chain arcs cross ``other``'s plane, nearest to ``P[v]``."""
+    best, bd = None, np.inf
+    for arc in mem.arcs:
+        if arc is None:
+            continue
+        a = np.vstack([arc.points, arc.points[:1]]) if arc.closed else arc.points
+        s = other.plane.side(a)
+        i = np.flatnonzero((s[:-1] >= 0) != (s[1:] >= 0))
+        if not len(i):
+            continue
+        den = s[i] - s[i + 1]
+        t = s[i] / np.where(den != 0, den, 1.0)
+        x = a[i] + t[:, None] * (a[i + 1] - a[i])
+        d = np.linalg.norm(x - P[v], axis=1)
+        j = int(np.argmin(d))
+        if d[j] < bd:
+            best, bd = x[j], d[j]
+    return best
+
+
+def _check_chain_order(skin: ShellMesh, ch: np.ndarray, arc, name: str, side: str) -> None:
+    """An open chain's vertices must run along its exact curve in order; a vertex placed
+    behind its predecessor means the imprint folded the skin there."""
+    if arc is None or arc.closed or len(ch) < 3:
+        return
+    s = _arc_param(skin.points[ch], arc.points, False)[0]
+    ds = np.diff(s) * (1.0 if s[-1] >= s[0] else -1.0)
+    back = np.flatnonzero(ds < -1e-9 * skin.diagonal)
+    if len(back):
+        v = int(ch[back[0] + 1])
+        raise ImprintError(f"member '{name}': its {side} chain runs backwards along the member's curve at skin vertex "
+                           f"{v} {np.round(skin.points[v], 6).tolist()} (the imprint folded the skin there); "
+                           "use a smaller --size, or remesh the skin before imprinting")
+
+
+def _side_of(side: str) -> tuple:
+    """('upper', 0) for 'upper' or 'upper_0' (an explicit member's chain piece)."""
+    base, _, tail = side.rpartition("_")
+    if base and tail.isdigit():
+        return base, int(tail)
+    return side, 0
+
+
+def _join_pieces(pieces: list, name: str, side: str) -> np.ndarray:
+    """Join chain pieces that share end vertices into one chain (in piece order)."""
+    out = np.asarray(pieces[0], np.int64)
+    for k, p in enumerate(pieces[1:], 1):
+        p = np.asarray(p, np.int64)
+        if k == 1 and out[0] in (p[0], p[-1]) and out[-1] not in (p[0], p[-1]):
+            out = out[::-1]
+        if p[0] == out[-1]:
+            out = np.concatenate([out, p[1:]])
+        elif p[-1] == out[-1]:
+            out = np.concatenate([out, p[::-1][1:]])
+        else:
+            raise ImprintError(f"member '{name}': pieces {k - 1} and {k} of its {side} chain do not meet at a "
+                               "skin vertex; imprint the member again (its polyline points must lie on the skin)")
+    return out
+
+
+@dataclass
+class _Arc:
+    points: np.ndarray
+    closed: bool = False
+
+
+def _join_arcs(arcs: list):
+    """One open polyline through the exact curves of a chain's pieces (None if one is missing)."""
+    if any(a is None or a.closed for a in arcs):
+        return None
+    out = np.asarray(arcs[0].points, float)
+    for k, a in enumerate(arcs[1:], 1):
+        p = np.asarray(a.points, float)
+        if k == 1:
+            d = [np.linalg.norm(out[i] - p[j]) for i in (0, -1) for j in (0, -1)]
+            if int(np.argmin(d)) < 2:
+                out = out[::-1]
+        if np.linalg.norm(out[-1] - p[-1]) < np.linalg.norm(out[-1] - p[0]):
+            p = p[::-1]
+        out = np.vstack([out, p[1:]])
+    return _Arc(out)
+
+
+def _gather(skin: ShellMesh, chains, infos, tol: float) -> list:
+    by_name = {m.name: i for i, m in enumerate(infos)}
+    grouped = [dict() for _ in infos]
+    for c in chains:
+        if c.member not in by_name:
+            raise LayoutError(f"chain of member '{c.member}' ({c.side}) has no MemberInfo; pass one MemberInfo per "
+                              f"member (given: {[m.name for m in infos][:6]}{'...' if len(infos) > 6 else ''})")
+        side, piece = _side_of(c.side)
+        g = grouped[by_name[c.member]].setdefault(side, {})
+        if piece in g:
+            raise ImprintError(f"member '{c.member}' has two '{c.side}' chains; imprint each side once")
+        g[piece] = c
+    mems = []
+    diag = skin.diagonal
+    for info, g in zip(infos, grouped):
+        if not g:
+            raise ImprintError(f"member '{info.name}' has no imprint chain: it was not imprinted into the skin; "
+                               "imprint every member before building the member meshes")
+        closed = [side for side, pcs in g.items() for c in pcs.values()
+                  if (c.arc.closed if c.arc is not None else side == "loop")]
+        if closed:
+            if len(g) != 1 or len(g[closed[0]]) != 1:
+                raise ImprintError(f"member '{info.name}' has a closed chain and other chains; a full-chord member "
+                                   "has exactly one closed chain")
+            c = next(iter(g[closed[0]].values()))
+            mem = _Member(info)
+            mem.loop = _complete_chain(skin, c.vertices, True, info.name, c.side)
+            mem.arcs = (c.arc,)
+        else:
+            if set(g) != {"upper", "lower"}:
+                raise ImprintError(f"member '{info.name}' has chains {sorted(g)}; it needs an 'upper' and a 'lower' "
+                                   "chain (or one closed 'loop' chain): imprint both skin sides")
+            mem = _Member(info)
+            sides, arcs = [], []
+            for side in ("upper", "lower"):
+                pcs = [g[side][k] for k in sorted(g[side])]
+                ch = _join_pieces([_complete_chain(skin, c.vertices, False, info.name, c.side) for c in pcs],
+                                  info.name, side)
+                arc = pcs[0].arc if len(pcs) == 1 else _join_arcs([c.arc for c in pcs])
+                _check_chain_order(skin, ch, arc, info.name, side)
+                sides.append(ch)
+                arcs.append(arc)
+            mem.upper, mem.lower = sides
+            mem.arcs = tuple(arcs)
+        if not info.is_planar:
+            pp, pn = _fit_plane(skin.points[mem.chain_vertices()], tol * diag / max(
+                float(np.linalg.norm(np.ptp(skin.points[mem.chain_vertices()], axis=0))), 1e-300))
+            if pn is not None:
+                mem.info = replace(info, plane_point=pp, plane_normal=pn)
+        mems.append(mem)
+    return mems
+
+
+def _orient(mems, P):
+    """Orient each open member's upper chain along its direction and its lower chain to match."""
+    for m in mems:
+        if m.loop is not None:
+            continue
+        U, L = m.upper, m.lower
+        d = m.info.direction
+        if d is not None and (P[U[-1]] - P[U[0]]) @ d < 0:
+            U = U[::-1]
+        same = np.linalg.norm(P[U[0]] - P[L[0]]) + np.linalg.norm(P[U[-1]] - P[L[-1]])
+        swap = np.linalg.norm(P[U[0]] - P[L[-1]]) + np.linalg.norm(P[U[-1]] - P[L[0]])
+        if swap < same:
+            L = L[::-1]
+        m.upper, m.lower = U, L
+
+
+def _find_junctions(mems, P, diag) -> list:
+    """Junctions = pairs of members whose chains share skin vertices (vectorised incidence)."""
+    verts = [m.chain_vertices() for m in mems]
+    vid = np.concatenate(verts)
+    mid = np.repeat(np.arange(len(mems)), [len(v) for v in verts])
+    vm = np.unique(np.stack([vid, mid], 1), axis=0)          # sorted by vertex then member
+    cnt = np.bincount(vm[:, 0], minlength=len(P))
+    multi = vm[cnt[vm[:, 0]] >= 2]
+    shared: dict = {}
+    starts = np.flatnonzero(np.concatenate([[True], multi[1:, 0] != multi[:-1, 0]])) if len(multi) else \
+        np.zeros(0, np.int64)
+    bounds = np.append(starts, len(multi))
+    for s, e in zip(bounds[:-1], bounds[1:]):                # loop over crossing vertices
+        v, ms = int(multi[s, 0]), multi[s:e, 1]
+        for a in range(len(ms)):
+            for b in range(a + 1, len(ms)):
+                shared.setdefault((int(ms[a]), int(ms[b])), []).append(v)
+    out = []
+    for (i, j), vs in sorted(shared.items()):
+        mi, mj = mems[i], mems[j]
+        if len(vs) != 2:
+            raise ImprintError(f"members '{mi.name}' and '{mj.name}' meet at {len(vs)} skin point(s) "
+                               f"{np.round(P[vs], 6).tolist()}; two members must meet at exactly two (one on each "
+                               "skin side): move one of them, or use a smaller --size")
+        vu, vl = vs
+        for m in (mi, mj):                                    # upper crossing: on an upper chain
+            if m.upper is not None:
+                if vl in set(m.upper.tolist()) and vu not in set(m.upper.tolist()):
+                    vu, vl = vl, vu
+                break
+        out.append(_Junction(i, j, vu, vl))
+    return out
+
+
+def _exact_junction_vertices(junctions, mems, P, diag, eps):
+    """Move crossing vertices that are not on both planes (within 1e-12 of the diagonal) to
+    the exact crossing of the input surface with both planes."""
+    for J in junctions:
+        mi, mj = mems[J.i], mems[J.j]
+        if not (mi.info.is_planar and mj.info.is_planar):
+            continue
+        for v in (J.vu, J.vl):
+            off = max(abs(mi.info.plane.side(P[v])), abs(mj.info.plane.side(P[v])))
+            if off <= 1e-12 * diag:
+                continue
+            x = _exact_crossing(P, v, mi, mj.info)
+            if x is None:
+                x = _exact_crossing(P, v, mj, mi.info)
+            if x is None or np.linalg.norm(x - P[v]) > 1e-3 * diag:
+                if off > eps:
+                    raise ImprintError(f"members '{mi.name}' and '{mj.name}' share skin vertex {v} off the "
+                                       "intersection of their planes; imprint them again (their crossing was "
+                                       "not inserted)")
+                continue
+            P[v] = x
+
+
+def _classify(mems, junctions):
+    """For every member: which junction closes each end, which lie inside it."""
+    for jx, J in enumerate(junctions):
+        for k in (J.i, J.j):
+            m = mems[k]
+            other = mems[J.j if k == J.i else J.i].name
+            if m.loop is not None:
+                if not ((m.loop == J.vu).any() and (m.loop == J.vl).any()):
+                    raise ImprintError(f"member '{m.name}' meets '{other}' on one skin side only; imprint both")
+                J.where[k] = "interior"
+                m.interior.append(jx)
+                continue
+            U, L = m.upper, m.lower
+            pu = np.flatnonzero(U == J.vu)
+            pl = np.flatnonzero(L == J.vl)
+            if not (len(pu) and len(pl)):
+                pu, pl = np.flatnonzero(U == J.vl), np.flatnonzero(L == J.vu)
+            if not (len(pu) and len(pl)):
+                raise ImprintError(f"member '{m.name}' meets '{other}' twice on the same skin side; its upper and "
+                                   "lower chains must each cross the other member once: check the layout (the "
+                                   "member may run along the other one)")
+            iu, il = int(pu[0]), int(pl[0])
+            eu = 0 if iu == 0 else (1 if iu == len(U) - 1 else -1)
+            el = 0 if il == 0 else (1 if il == len(L) - 1 else -1)
+            if eu >= 0 and el >= 0 and eu == el:
+                if m.closing[eu] is not None:
+                    raise ImprintError(f"member '{m.name}' ends on two members at the same end "
+                                       f"('{mems[_other(junctions[m.closing[eu]], k)].name}' and '{other}'); "
+                                       "move one of them")
+                m.closing[eu] = jx
+                J.where[k] = "end"
+            elif eu < 0 and el < 0:
+                m.interior.append(jx)
+                J.where[k] = "interior"
+            else:
+                raise ImprintError(
+                    f"member '{m.name}': its chains do not close into panels at its junction with '{other}' (the "
+                    f"{'upper' if eu >= 0 else 'lower'} chain ends there but the "
+                    f"{'lower' if eu >= 0 else 'upper'} chain runs on); the crossing on the other skin side is "
+                    "missing: check that both members reach both skin sides, or use a smaller --size")
+    # interior junctions must come in the same order along the upper and the lower chain
+    for k, m in enumerate(mems):
+        if m.loop is not None or len(m.interior) < 2:
+            continue
+        iu, il = [], []
+        for jx in m.interior:
+            J = junctions[jx]
+            a, b = (J.vu, J.vl) if (m.upper == J.vu).any() else (J.vl, J.vu)
+            iu.append(int(np.flatnonzero(m.upper == a)[0]))
+            il.append(int(np.flatnonzero(m.lower == b)[0]))
+        o = np.argsort(iu, kind="stable")
+        if (np.diff(np.asarray(il)[o]) <= 0).any():
+            raise ImprintError(f"member '{m.name}': the members crossing it do so in a different order on the upper "
+                               "and on the lower skin, so their junction lines would cross inside it; check the "
+                               "layout")
+        m.interior = [m.interior[q] for q in o]
+
+
+def _other(J, k):
+    return J.j if k == J.i else J.i
+
+
+def _chain_edge_len(P, chain, v, closed=False):
+    """Mean length of the chain edges at vertex ``v`` of ``chain``."""
+    p = np.flatnonzero(chain == v)
+    if not len(p):
+        return None
+    p = int(p[0])
+    n = len(chain)
+    nb = [(p - 1) % n, (p + 1) % n] if closed else [q for q in (p - 1, p + 1) if 0 <= q < n]
+    return float(np.mean([np.linalg.norm(P[chain[q]] - P[v]) for q in nb]))
+
+
+def _end_spacing(mems, J, v, P):
+    """Chain spacing at crossing vertex ``v`` for the junction line of ``J``: the geometric
+    mean of the chain-edge lengths there, over both members."""
+    hs = []
+    for k in (J.i, J.j):
+        m = mems[k]
+        for ch in ((m.loop,) if m.loop is not None else (m.upper, m.lower)):
+            h = _chain_edge_len(P, ch, v, closed=m.loop is not None)
+            if h is not None:
+                hs.append(h)
+    return float(np.exp(np.mean(np.log(np.maximum(hs, 1e-300))))) if hs else None
+
+
+def _outline_nodes(m: _Member, junctions) -> list:
+    """Ordered boundary loop (node indices) of an open member: upper, end 1, lower reversed, end 0."""
+    U, L = m.upper, m.lower
+    parts = [U]
+    for e in (1, 0):
+        jx = m.closing[e]
+        ln = junctions[jx].nodes if jx is not None else m.end_lines[e]
+        if ln is None:
+            ln = np.zeros(0, np.int64)
+        a = U[-1] if e == 1 else L[0]
+        if len(ln) and ln[0] != a:
+            ln = ln[::-1]
+        parts.append(ln[1:-1] if len(ln) else ln)
+        if e == 1:
+            parts.append(L[::-1])
+    loop = np.concatenate(parts)
+    keep = loop != np.roll(loop, 1)              # zero-length sides: drop repeated corners
+    return loop[keep]
+
+
+def _plane_frame(m: _Member, P: np.ndarray, nodes: np.ndarray):
+    n = m.info.plane_normal
+    d = m.info.direction
+    if d is None and m.upper is not None:
+        d = P[m.upper[-1]] - P[m.upper[0]]
+    e1 = None
+    if d is not None:
+        e1 = d - (d @ n) * n
+        e1 = e1 / np.linalg.norm(e1) if np.linalg.norm(e1) > 1e-12 * max(np.linalg.norm(d), 1e-300) else None
+    if e1 is None:
+        X = P[nodes] - P[nodes].mean(0)
+        X = X - np.outer(X @ n, n)
+        _, _, vt = np.linalg.svd(X, full_matrices=False)
+        e1 = vt[0] - (vt[0] @ n) * n
+        e1 /= np.linalg.norm(e1)
+        if e1[np.argmax(np.abs(e1))] < 0:
+            e1 = -e1
+    e2 = np.cross(n, e1)
+    c = P[nodes].mean(0)
+    origin = c - ((c - m.info.plane_point) @ n) * n
+    return e1, e2, origin
+
+
+# ============================================================================ chain spacing
+def _arc_param(q: np.ndarray, poly: np.ndarray, closed: bool):
+    """Arc-length parameter of the closest point on a polyline to each query point, and the
+    polyline's cumulative lengths (vectorised: KD-tree of segment midpoints, candidate radius)."""
+    p = np.vstack([poly, poly[:1]]) if closed else poly
+    a, b = p[:-1], p[1:]
+    ab = b - a
+    L = np.linalg.norm(ab, axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(L)])
+    tree = cKDTree(0.5 * (a + b))
+    d0, _ = tree.query(q)
+    cand = tree.query_ball_point(q, d0 + 0.5 * L.max() + 1e-300)
+    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
+    qi = np.repeat(np.arange(len(q)), cnt)
+    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
+    L2 = np.maximum(L[si] ** 2, 1e-300)
+    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / L2, 0.0, 1.0)
+    dist = np.linalg.norm(a[si] + t[:, None] * ab[si] - q[qi], axis=1)
+    order = np.lexsort((dist, qi))
+    first = np.ones(len(order), bool)
+    first[1:] = qi[order][1:] != qi[order][:-1]
+    o = order[first]
+    return cum[si[o]] + t[o] * L[si[o]], p, cum
+
+
+def _arc_point(p: np.ndarray, cum: np.ndarray, s: np.ndarray) -> np.ndarray:
+    s = np.clip(s, 0.0, cum[-1])
+    i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2)
+    seg = np.maximum(cum[i + 1] - cum[i], 1e-300)
+    t = np.clip((s - cum[i]) / seg, 0.0, 1.0)
+    return p[i] + t[:, None] * (p[i + 1] - p[i])
+
+
+def _sub_polyline(p: np.ndarray, cum: np.ndarray, s0: float, s1: float) -> np.ndarray:
+    """The piece of a polyline (points ``p``, cumulative lengths ``cum``) between parameters
+    ``s0 < s1``."""
+    inner = (cum > s0) & (cum < s1)
+    return np.vstack([_arc_point(p, cum, np.array([s0])), p[inner], _arc_point(p, cum, np.array([s1]))])
+
+
+def _skin_vertex_faces(faces: np.ndarray, n: int):
+    f = faces[:, :3]
+    v = f.ravel()
+    fi = np.repeat(np.arange(len(f)), 3)
+    o = np.argsort(v, kind="stable")
+    ptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(v, minlength=n), out=ptr[1:])
+    return ptr, fi[o]
+
+
+def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: float = 0.67, rounds: int = 20,
+                  min_skin_angle: float = 10.0) -> int:
+    """Even out uneven chain spacing by sliding chain vertices along their exact arcs.
+
+    ``chains_arcs``: (open chain, its exact curve as an open polyline) pairs. A chain vertex
+    (not a crossing, not a chain end, not on a geometric feature line) whose
+    two chain edges differ by more than ``1/ratio`` moves half-way towards the arc-length
+    midpoint of its neighbours. The point stays on the exact curve (input surface and member
+    plane); moves that would fold a skin triangle or drop its smallest angle below
+    ``min(current, min_skin_angle)`` are refused. Updates ``P`` in place; returns the number
+    of vertices moved."""
+    F = skin.faces[:, :3]
+    n = len(P)
+    count = np.zeros(n, np.int64)
+    for m in mems:
+        np.add.at(count, np.unique(m.chain_vertices()), 1)
+    geo = np.zeros(n, bool)
+    geo[skin.feature_edges[skin.feature_edge_ids < 0].ravel()] = True
+    # per chain: parameters along its arc, ordered; collect movable interior vertices
+    recs = []
+    for ch, poly in chains_arcs:                     # loop over chains
+        if poly is None or len(ch) < 3:
+            continue
+        s, p, cum = _arc_param(P[ch], poly, False)
+        if s[-1] < s[0]:
+            ch = ch[::-1]
+            s = s[::-1]
+        if (np.diff(s) <= 0).any():
+            continue
+        recs.append((ch, s, p, cum))
+    if not recs:
+        return 0
+    ptr, vf = _skin_vertex_faces(F, n)
+    moved_total = np.zeros(n, bool)
+
+    def tri_state(X, fids):
+        t = F[fids]
+        a, b, c = X[t[:, 0]], X[t[:, 1]], X[t[:, 2]]
+        nrm = np.cross(b - a, c - a)
+        return nrm, _tri_min_angles(X, t)
+
+    for _ in range(rounds):
+        prop_v, prop_x = [], []
+        for ch, s, p, cum in recs:                   # loop over chains (vectorised inside)
+            sp, sc, sn = s[:-2], s[1:-1], s[2:]
+            lp, ln = sc - sp, sn - sc
+            v = ch[1:-1]
+            mov = (count[v] == 1) & ~geo[v] & (np.minimum(lp, ln) < ratio * np.maximum(lp, ln))
+            if not mov.any():
+                continue
+            target = sc + 0.5 * (0.5 * (sp + sn) - sc)
+            prop_v.append(v[mov])
+            prop_x.append(_arc_point(p, cum, target[mov]))
+        if not prop_v:
+            break
+        v = np.concatenate(prop_v)
+        x = np.vstack(prop_x)
+        ok = np.ones(len(v), bool)
+        for _ in range(6):                           # refuse moves that spoil a skin triangle
+            vv = v[ok]
+            if not len(vv):
+                break
+            k = ptr[vv + 1] - ptr[vv]
+            fids = np.unique(vf[np.repeat(ptr[vv], k) + np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)])
+            X = P.copy()
+            X[vv] = x[ok]
+            n0, a0 = tri_state(P, fids)
+            n1, a1 = tri_state(X, fids)
+            fold = np.einsum("ij,ij->i", n0, n1) <= 0.5 * np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1)
+            # a move may not make its vertex's star worse than it was (or than min_skin_angle)
+            worst = np.full(n, np.inf)
+            for c in range(3):
+                np.minimum.at(worst, F[fids, c], a0)
+            floor = np.where(np.isin(F[fids], vv), np.minimum(worst[F[fids]], min_skin_angle), np.inf).min(1)
+            bad = fold | (a1 < floor - 1e-9)
+            if not bad.any():
+                break
+            badv = np.unique(F[fids[bad]])
+            ok &= ~np.isin(v, badv)
+        if not ok.any():
+            break
+        P[v[ok]] = x[ok]
+        moved_total[v[ok]] = True
+        # refresh parameters of the moved chains
+        new = []
+        for ch, s, p, cum in recs:
+            m = np.isin(ch, v[ok])
+            if m.any():
+                s = s.copy()
+                s[m] = _arc_param(P[ch[m]], p, False)[0]
+            new.append((ch, s, p, cum))
+        recs = new
+    return int(moved_total.sum())
+
+
+def _dist_to_polyline(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    if len(poly) < 2:
+        return np.linalg.norm(q - poly[0], axis=1)
+    s, p, cum = _arc_param(q, poly, False)
+    return np.linalg.norm(_arc_point(p, cum, s) - q, axis=1)
+
+
+def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, max_pieces: int = 16,
+                            min_piece: float = 0.02, min_height: float = 0.1, rounds: int = 3):
+    """Split chain edges that are long compared with the member's local height.
+
+    Where a member is thinner than its chain spacing (the spars of a thin wing), no
+    triangle joining its upper and lower chains can have good angles: a chain edge longer
+    than ``ratio`` times the distance from its midpoint to the member's opposite chain is
+    split into equal pieces along its exact arc (new points on the input surface and the
+    member plane), and the two skin triangles on that edge are split into fans. Pieces are
+    never shorter than ``min_piece * size`` and at most ``max_pieces``; where the member is
+    thinner than ``min_height * size`` (the tip of a wedge, a trailing edge) nothing is
+    split. Returns the updated ``(P, F, C, FE, FID)``; the members' sides get the new
+    vertices (call ``sync_sides`` afterwards)."""
+    for _ in range(rounds):
+        # ------------------------------------------------ candidates, per member side
+        cm, cw, ci, ck = [], [], [], []
+        for mi, m in enumerate(mems):                 # loop over members
+            for w in (0, 1):
+                ch, other, arc = m.sides[w], m.sides[1 - w], m.side_arcs[w]
+                if arc is None or len(ch) < 2:
+                    continue
+                a, b = P[ch[:-1]], P[ch[1:]]
+                L = np.linalg.norm(b - a, axis=1)
+                H = _dist_to_polyline(0.5 * (a + b), P[other])
+                want = np.where(H >= min_height * size, np.ceil(L / np.maximum(ratio * H, 1e-300)), 1)
+                k = np.minimum(np.minimum(want, max_pieces), np.floor(L / (min_piece * size))).astype(np.int64)
+                i = np.flatnonzero(k >= 2)
+                cm.append(np.full(len(i), mi))
+                cw.append(np.full(len(i), w))
+                ci.append(i)
+                ck.append(k[i])
+        if not cm or not sum(len(x) for x in ci):
+            break
+        cm, cw, ci, ck = (np.concatenate(x).astype(np.int64) for x in (cm, cw, ci, ck))
+        a_ = np.array([mems[m].sides[w][i] for m, w, i in zip(cm, cw, ci)], np.int64)
+        b_ = np.array([mems[m].sides[w][i + 1] for m, w, i in zip(cm, cw, ci)], np.int64)
+        # ------------------------------------------------ the two skin faces of every candidate edge
+        n = len(P)
+        ek = np.minimum(a_, b_) * n + np.maximum(a_, b_)
+        fk = (np.minimum(F, np.roll(F, -1, axis=1)) * n + np.maximum(F, np.roll(F, -1, axis=1))).ravel()
+        o = np.argsort(fk, kind="stable")
+        sk = fk[o]
+        lo, hi = np.searchsorted(sk, ek, "left"), np.searchsorted(sk, ek, "right")
+        if ((hi - lo) != 2).any():
+            bad = int(np.flatnonzero((hi - lo) != 2)[0])
+            raise ImprintError(f"member '{mems[cm[bad]].name}': chain edge {a_[bad]}-{b_[bad]} is not an edge between "
+                               "two skin triangles; imprint the member again")
+        f0, f1 = o[lo] // 3, o[lo + 1] // 3
+        # face-disjoint subset: a candidate is taken when it is the first to claim both its faces
+        idx = np.arange(len(cm))
+        owner = np.full(len(F), len(cm))
+        np.minimum.at(owner, f0, idx)
+        np.minimum.at(owner, f1, idx)
+        take = (owner[f0] == idx) & (owner[f1] == idx)
+        cm, cw, ci, ck, a_, b_, f0, f1 = (x[take] for x in (cm, cw, ci, ck, a_, b_, f0, f1))
+        # ------------------------------------------------ new points on the exact arcs
+        nnew = ck - 1
+        first = len(P) + np.concatenate([[0], np.cumsum(nnew)[:-1]])
+        X = np.zeros((int(nnew.sum()), 3))
+        off = first - len(P)
+        for mi, w in sorted(set(zip(cm.tolist(), cw.tolist()))):   # one arc query per member side
+            sel = np.flatnonzero((cm == mi) & (cw == w))
+            s, p, cum = _arc_param(P[np.concatenate([a_[sel], b_[sel]])], mems[mi].side_arcs[w], False)
+            sa, sb = s[:len(sel)], s[len(sel):]
+            rep = np.repeat(np.arange(len(sel)), nnew[sel])
+            j = np.arange(len(rep)) - np.repeat(np.cumsum(nnew[sel]) - nnew[sel], nnew[sel]) + 1
+            tpar = sa[rep] + (sb[rep] - sa[rep]) * j / ck[sel][rep]
+            pos = np.repeat(off[sel], nnew[sel]) + j - 1
+            X[pos] = _arc_point(p, cum, tpar)
+        # ------------------------------------------------ node sequences a, new..., b of every split edge
+        seq_len = ck + 1
+        seq_start = np.concatenate([[0], np.cumsum(seq_len)[:-1]])
+        rep = np.repeat(np.arange(len(ck)), seq_len)
+        j = np.arange(len(rep)) - seq_start[rep]
+        seq = np.where(j == 0, a_[rep], np.where(j == ck[rep], b_[rep], first[rep] + j - 1))
+        # ------------------------------------------------ fans replacing the two faces
+        new_faces, new_C = [], []
+        for f in (f0, f1):
+            t = F[f]
+            fwd = np.zeros(len(f), bool)
+            c = np.zeros(len(f), np.int64)
+            for q in range(3):
+                u, v = t[:, q], t[:, (q + 1) % 3]
+                hit_f = (u == a_) & (v == b_)
+                hit_r = (u == b_) & (v == a_)
+                fwd |= hit_f
+                c = np.where(hit_f | hit_r, t[:, (q + 2) % 3], c)
+            e_of = np.repeat(np.arange(len(ck)), ck)          # k fan triangles per face
+            jj = np.arange(len(e_of)) - np.repeat(np.cumsum(ck) - ck, ck)
+            s0 = seq_start[e_of] + np.where(fwd[e_of], jj, ck[e_of] - jj)
+            s1 = seq_start[e_of] + np.where(fwd[e_of], jj + 1, ck[e_of] - jj - 1)
+            new_faces.append(np.stack([seq[s0], seq[s1], c[e_of]], 1))
+            new_C.append(C[f][e_of])
+        drop = np.zeros(len(F), bool)
+        drop[f0] = drop[f1] = True
+        # ------------------------------------------------ feature edges: (a, b) -> its pieces, same owner
+        m_fe = len(P) + len(X)
+        fe_key = FE[:, 0] * m_fe + FE[:, 1]
+        sp_key = np.minimum(a_, b_) * m_fe + np.maximum(a_, b_)
+        hit = np.isin(fe_key, sp_key)
+        okey = np.argsort(fe_key, kind="stable")
+        pos = okey[np.clip(np.searchsorted(fe_key[okey], sp_key), 0, len(okey) - 1)]
+        owner_id = np.where(fe_key[pos] == sp_key, FID[pos], -1).astype(np.int32)
+        pieces = np.sort(np.stack([seq[:-1], seq[1:]], 1), axis=1)
+        valid = np.ones(len(seq) - 1, bool)
+        valid[(seq_start + seq_len - 1)[:-1]] = False             # no piece joins two edges' sequences
+        P = np.vstack([P, X])
+        F = np.vstack([F[~drop]] + new_faces)
+        C = np.concatenate([C[~drop]] + new_C)
+        FE = np.vstack([FE[~hit], pieces[valid]])
+        FID = np.concatenate([FID[~hit], np.repeat(owner_id, ck)])
+        # ------------------------------------------------ chains get the new vertices
+        for mi, w in sorted(set(zip(cm.tolist(), cw.tolist()))):   # loop over refined member sides
+            sel = np.flatnonzero((cm == mi) & (cw == w))
+            ch = mems[mi].sides[w]
+            cnt = np.ones(len(ch), np.int64)
+            cnt[ci[sel]] += nnew[sel]
+            out = np.repeat(ch, cnt)
+            start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+            k = nnew[sel]
+            within = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)
+            out[np.repeat(start[ci[sel]] + 1, k) + within] = np.repeat(first[sel], k) + within
+            mems[mi].sides[w] = out
+    return P, F, C, FE, FID
+
+
+# ============================================================================ pair checks
+def _to2d(pts, e1, e2, o):
+    X = pts - o
+    return np.stack([X @ e1, X @ e2], 1)
+
+
+def _point_in_polygon(q: np.ndarray, poly: np.ndarray, tol: float, chunk: int = 2048) -> np.ndarray:
+    """Points of ``q`` strictly inside the closed polygon ``poly`` (farther than ``tol`` from
+    its boundary), even-odd rule, vectorised over points x edges in chunks of points."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    ab = b - a
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    out = np.zeros(len(q), bool)
+    for s in range(0, len(q), chunk):
+        qq = q[s:s + chunk]
+        qx, qy = qq[:, None, 0], qq[:, None, 1]
+        cond = (a[None, :, 1] > qy) != (b[None, :, 1] > qy)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xc = a[None, :, 0] + (qy - a[None, :, 1]) * ab[None, :, 0] / ab[None, :, 1]
+        inside = (np.count_nonzero(cond & (qx < xc), axis=1) % 2) == 1
+        t = np.clip(np.einsum("qij,ij->qi", qq[:, None] - a[None], ab) / np.where(L2 > 0, L2, 1.0), 0, 1)
+        d = np.linalg.norm(a[None] + t[..., None] * ab[None] - qq[:, None], axis=2).min(1)
+        out[s:s + chunk] = inside & (d > tol)
+    return out
+
+
+def _line_intervals(poly: np.ndarray, q: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Parameter intervals of the line ``q + s d`` inside the closed 2D polygon (even-odd)."""
+    nrm = np.array([-d[1], d[0]])
+    s = (poly - q) @ nrm
+    a, b = s, np.roll(s, -1)
+    cross = (a >= 0) != (b >= 0)
+    if not cross.any():
+        return np.zeros((0, 2))
+    pa, pb = poly[cross], np.roll(poly, -1, axis=0)[cross]
+    t = a[cross] / (a[cross] - b[cross])
+    x = pa + t[:, None] * (pb - pa)
+    u = np.sort((x - q) @ d)
+    return u[: len(u) // 2 * 2].reshape(-1, 2)
+
+
+def _check_member_pairs(mems, polys, P, joined: set, eps: float, coplanar: bool = True, crossing: bool = True):
+    """Coplanar members that overlap (``coplanar``) and members that cross without meeting
+    on the skin (``crossing``) are layout errors naming both. ``polys``: each member's
+    outline (node indices, implicitly closed)."""
+    planar = [k for k, m in enumerate(mems) if m.info.is_planar]
+    if len(planar) < 2:
+        return
+    lo = np.stack([P[polys[k]].min(0) for k in planar]) - eps
+    hi = np.stack([P[polys[k]].max(0) for k in planar]) + eps
+    ov = (lo[:, None, :] <= hi[None, :, :]).all(2) & (lo[None, :, :] <= hi[:, None, :]).all(2)
+    ia, ib = np.nonzero(np.triu(ov, 1))
+    for a, b in zip(ia, ib):                         # loop over candidate member pairs
+        i, j = planar[a], planar[b]
+        mi, mj = mems[i], mems[j]
+        ni, nj = mi.info.plane_normal, mj.info.plane_normal
+        e1, e2, o = _frame_from_normal(ni, mi.info.plane_point)
+        pi2 = _to2d(P[polys[i]], e1, e2, o)
+        cr = np.linalg.norm(np.cross(ni, nj))
+        if cr <= 1e-9:
+            if not coplanar or abs((mj.info.plane_point - mi.info.plane_point) @ ni) > 1e3 * eps:
+                continue                             # parallel, distinct planes
+            pj2 = _to2d(P[polys[j]], e1, e2, o)
+            tol = 10 * eps
+            sj = np.vstack([pj2, 0.5 * (pj2 + np.roll(pj2, -1, 0)), _interior_samples(pj2)])
+            si = np.vstack([pi2, 0.5 * (pi2 + np.roll(pi2, -1, 0)), _interior_samples(pi2)])
+            if _point_in_polygon(sj, pi2, tol).any() or _point_in_polygon(si, pj2, tol).any():
+                raise LayoutError(f"members '{mi.name}' and '{mj.name}' lie in the same plane and overlap; remove "
+                                  "one of them or move it so their areas do not overlap")
+            continue
+        if not crossing or (i, j) in joined:
+            continue
+        # intersection line of the two planes, in member i's frame
+        dl = np.cross(ni, nj)
+        dl /= np.linalg.norm(dl)
+        A = np.stack([ni, nj, dl])
+        rhs = np.array([ni @ mi.info.plane_point, nj @ mj.info.plane_point, dl @ mi.info.plane_point])
+        q3 = np.linalg.solve(A, rhs)
+        ej1, ej2, oj = _frame_from_normal(nj, mj.info.plane_point)
+        Ii = _line_intervals(pi2, _to2d(q3[None], e1, e2, o)[0], np.array([dl @ e1, dl @ e2]))
+        Ij = _line_intervals(_to2d(P[polys[j]], ej1, ej2, oj), _to2d(q3[None], ej1, ej2, oj)[0],
+                             np.array([dl @ ej1, dl @ ej2]))
+        if not len(Ii) or not len(Ij):
+            continue
+        over = np.minimum(Ii[:, None, 1], Ij[None, :, 1]) - np.maximum(Ii[:, None, 0], Ij[None, :, 0])
+        if (over > 1e3 * eps).any():
+            raise LayoutError(f"members '{mi.name}' and '{mj.name}' cross each other inside the skin but do not "
+                              "meet on it (their skin curves share no crossing point): move one so they do not "
+                              "cross, or extend both so they meet on both skin sides")
+
+
+def _frame_from_normal(n, p):
+    a = np.eye(3)[int(np.argmin(np.abs(n)))]
+    e1 = np.cross(n, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n, e1), np.asarray(p, float)
+
+
+def _interior_samples(poly2: np.ndarray) -> np.ndarray:
+    """Centroids of a coarse constrained triangulation of a simple polygon (points strictly inside)."""
+    import triangle as tr
+
+    n = len(poly2)
+    if n < 3:
+        return np.zeros((0, 2))
+    seg = np.stack([np.arange(n), (np.arange(n) + 1) % n], 1)
+    try:
+        t = tr.triangulate({"vertices": poly2, "segments": seg.astype(np.int32)}, "pQ")
+    except Exception:                                 # pragma: no cover - degenerate outline
+        return np.zeros((0, 2))
+    T = np.asarray(t.get("triangles", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+    V = np.asarray(t["vertices"])
+    return V[T].mean(1) if len(T) else np.zeros((0, 2))
+
+
+# ============================================================================ main entry
+def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_angle: float = DEFAULT_MIN_ANGLE,
+                  relax_chains: bool = True, split_thin: bool = True, tol: float = 1e-9) -> ShellMesh:
+    """The skin plus every member's triangle mesh, in one conforming :class:`ShellMesh`.
+
+    ``skin`` is the imprinted triangle skin and ``chains`` its
+    :class:`~shellmesh_mdao.imprint.ChainResult` list (sides 'upper' and 'lower', an explicit
+    member's pieces 'upper_<s>'/'lower_<s>', or one closed chain for a full-chord member);
+    ``members_info`` one :class:`MemberInfo` (or :class:`~shellmesh_mdao.layout.MemberSpec`)
+    per member; ``size`` the target element size of the member meshes (the skin's working
+    edge length).
+
+    The member meshes use the chain vertices by index (no coordinate merging). Two local
+    repairs of the chains run first (both keep every skin vertex on the input surface and
+    the skin closed and conforming): ``relax_chains`` slides chain vertices along their exact
+    curve to even out very uneven chain spacing (skin vertex positions change, indices do
+    not), and ``split_thin`` splits chain edges much longer than the member is tall (a thin
+    wing's spars) into pieces, splitting the two skin triangles on each such edge (new skin
+    vertices are appended after the skin's).
+
+    Output numbering: the skin's points (then the points ``split_thin`` added), then every
+    junction line's interior nodes (junctions in order of their member pair), then the
+    members' own end-line nodes, then each member's interior nodes (in ``members_info``
+    order). Faces: the skin's triangles first (the same ones unless ``split_thin`` split some:
+    those are replaced by their pieces at the end of the skin block), then the members'
+    triangles, with component names ``<member>`` or ``<member>/seg_<j>`` for a member split at
+    X-junctions. Junction-line edges are added to ``feature_edges`` tagged with the component
+    id of the member that ends there (the rib of a T-junction) or, for X- and L-junctions, of
+    the member that comes first in ``members_info``; end-line edges are tagged with their
+    member. Junction nodes, end-line nodes and new chain vertices are added to
+    ``fixed_vertices``. A crossing vertex that is not on both member planes (a crossing the
+    imprint made by splitting a chain edge) is moved to the exact crossing of the input
+    surface with both planes (from the chains' exact arcs).
+
+    Raises :class:`ImprintError` when a member's chains do not close into panels (a missing or
+    inconsistent crossing, a chain that doubles back), :class:`LayoutError` for coplanar
+    members that overlap, members that cross inside the skin without meeting on it, or a
+    junction inside a non-planar member, and :class:`SizeError` for a bad ``size``.
+    """
+    if size is None or not np.isfinite(size) or size <= 0:
+        raise SizeError(f"member element size must be a positive length, got {size}; pass the skin's target edge "
+                        "length")
+    infos = [m if isinstance(m, MemberInfo) else MemberInfo.from_spec(m) for m in members_info]
+    names = [m.name for m in infos]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise LayoutError(f"members_info names members more than once: {dup}; give one MemberInfo per member")
+    if skin.n_points == 0:
+        raise ImprintError("the skin is empty; build members on an imprinted skin")
+    if skin.n_quads:
+        raise ImprintError("build_members works on the imprinted triangle skin; got quads (build the members "
+                           "before merging triangles into quads)")
+    diag = skin.diagonal
+    eps = tol * diag
+    if size > diag:
+        raise SizeError(f"member element size {size:g} is larger than the whole model ({diag:g}); give a size "
+                        "well below the wing's thickness")
+    P = skin.points.copy()
+    mems = _gather(skin, chains, infos, tol)
+    _orient(mems, P)
+    _check_member_pairs(mems, [m.loop if m.loop is not None else np.concatenate([m.upper, m.lower[::-1]])
+                               for m in mems], P, set(), eps, crossing=False)
+    junctions = _find_junctions(mems, P, diag)
+    _exact_junction_vertices(junctions, mems, P, diag, eps)
+    _classify(mems, junctions)
+    for J in junctions:
+        for k in (J.i, J.j):
+            if not mems[k].info.is_planar and J.where[k] == "interior":
+                raise LayoutError(f"members '{mems[J.i].name}' and '{mems[J.j].name}' meet inside the non-planar "
+                                  f"member '{mems[k].name}'; junction lines inside a non-planar member are not "
+                                  "supported: split it into planar members")
+    for m in mems:
+        m.make_sides(P)
+    if relax_chains:
+        _relax_chains(skin, P, mems, [(c, a) for m in mems for c, a in zip(m.sides, m.side_arcs)])
+    F, C = skin.faces[:, :3].copy(), skin.component.copy()
+    FE, FID = skin.feature_edges.copy(), skin.feature_edge_ids.copy()
+    n_skin0 = len(P)
+    if split_thin:
+        P, F, C, FE, FID = _split_thin_chain_edges(P, F, C, FE, FID, mems, size)
+        for m in mems:
+            m.sync_sides()
+    n_skin_pts = len(P)
+    # ---------------------------------------------------------------- new line nodes
+    new_pts = []
+    n_next = len(P)
+
+    def add_line(a, b, h0=None, h1=None):
+        nonlocal n_next
+        t = _line_params(float(np.linalg.norm(P[b] - P[a])), size, h0, h1)
+        inner = P[a][None] + t[:, None] * (P[b] - P[a])[None]
+        ids = n_next + np.arange(len(inner))
+        n_next += len(inner)
+        new_pts.append(inner)
+        return np.concatenate([[a], ids, [b]]).astype(np.int64)
+
+    for J in junctions:
+        J.nodes = add_line(J.vu, J.vl, _end_spacing(mems, J, J.vu, P), _end_spacing(mems, J, J.vl, P))
+    for m in mems:
+        if m.loop is not None:
+            continue
+        m.end_lines = [None, None]
+        for e, (a, b) in enumerate(((m.upper[0], m.lower[0]), (m.upper[-1], m.lower[-1]))):
+            if m.closing[e] is None and a != b:
+                m.end_lines[e] = add_line(a, b, _chain_edge_len(P, m.upper, a), _chain_edge_len(P, m.lower, b))
+    P = np.vstack([P] + new_pts)
+    # ---------------------------------------------------------------- checks between members
+    polys = [m.loop if m.loop is not None else _outline_nodes(m, junctions) for m in mems]
+    joined = {(J.i, J.j) for J in junctions}
+    _check_member_pairs(mems, polys, P, joined, eps, coplanar=False)
+    # ---------------------------------------------------------------- mesh every member
+    comp_names = list(skin.component_names)
+
+    def cid(nm):
+        if nm in comp_names:
+            return comp_names.index(nm)
+        comp_names.append(nm)
+        return len(comp_names) - 1
+
+    pts_parts, face_parts, comp_parts = [P], [], []
+    n_total = len(P)
+    for k, m in enumerate(mems):
+        inner_lines = [junctions[jx].nodes for jx in m.interior]
+        if m.info.is_planar:
+            if m.loop is not None:
+                bnd = [np.append(m.loop, m.loop[0])]
+            else:
+                bnd = [np.append(polys[k], polys[k][0])]
+            lines = bnd + inner_lines
+            nodes = np.unique(np.concatenate(lines))
+            remap = np.full(int(nodes.max()) + 1, -1, np.int64)
+            remap[nodes] = np.arange(len(nodes))
+            seg = np.vstack([np.stack([remap[ln[:-1]], remap[ln[1:]]], 1) for ln in lines])
+            e1, e2, origin = _plane_frame(m, P, nodes)
+            uv = _to2d(P[nodes], e1, e2, origin)
+            uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'")
+            st = uv_all[len(nodes):]
+            newp = origin + st[:, :1] * e1 + st[:, 1:] * e2
+            gid = np.concatenate([nodes, n_total + np.arange(len(st))])
+            gtris = gid[tris]
+        else:
+            newp, gtris = _mesh_coons(m, P, junctions, size, min_angle, n_total)
+        pts_parts.append(newp)
+        n_total += len(newp)
+        names_k = _piece_names(m, gtris, inner_lines, np.vstack(pts_parts), n_total,
+                               split=any(junctions[jx].kind == "X" for jx in m.interior))
+        comp_parts.append(np.array([cid(s) for s in names_k[0]], np.int32)[names_k[1]])
+        face_parts.append(gtris)
+    points = np.vstack(pts_parts)
+    # ---------------------------------------------------------------- feature edges and fixed nodes
+    fe, fid, fixed = [FE], [FID], [skin.fixed_vertices, np.arange(n_skin0, n_skin_pts)]
+    for J in junctions:
+        owner = J.i
+        if J.kind == "T":
+            owner = J.i if J.where[J.i] == "end" else J.j
+        ln = J.nodes
+        fe.append(np.stack([ln[:-1], ln[1:]], 1))
+        fid.append(np.full(len(ln) - 1, cid(mems[owner].name), np.int32))
+        fixed.append(ln)
+    for m in mems:
+        for ln in m.end_lines:
+            if ln is not None:
+                fe.append(np.stack([ln[:-1], ln[1:]], 1))
+                fid.append(np.full(len(ln) - 1, cid(m.name), np.int32))
+                fixed.append(ln)
+    mf = np.vstack(face_parts) if face_parts else np.zeros((0, 3), np.int64)
+    sf = np.hstack([F, np.full((len(F), 1), -1, np.int64)])
+    faces = np.vstack([sf, np.hstack([mf, np.full((len(mf), 1), -1, np.int64)])])
+    comp = np.concatenate([C] + comp_parts)
+    return ShellMesh(points, faces, comp, comp_names, np.concatenate(fixed), np.vstack(fe), np.concatenate(fid))
+
+
+def _piece_names(m: _Member, gtris, inner_lines, points, n_nodes, split: bool):
+    """Component names of a member's triangles: one name, or ``seg_<j>`` pieces ordered along
+    the member's direction when it is split."""
+    if not split or not inner_lines:
+        return [m.name], np.zeros(len(gtris), np.int64)
+    iseg = np.vstack([np.stack([ln[:-1], ln[1:]], 1) for ln in inner_lines])
+    npc, lab = _pieces(gtris, iseg, n_nodes)
+    d = m.info.direction
+    if d is None:
+        d = points[m.upper[-1]] - points[m.upper[0]] if m.upper is not None else np.array([1.0, 0.0, 0.0])
+    cen = points[gtris].mean(1) @ d
+    key = np.bincount(lab, weights=cen, minlength=npc) / np.bincount(lab, minlength=npc)
+    rank = np.empty(npc, np.int64)
+    rank[np.argsort(key, kind="stable")] = np.arange(npc)
+    return [f"{m.name}/seg_{r}" for r in range(npc)], rank[lab]
+
+
+def _mesh_coons(m: _Member, P, junctions, size, min_angle, n_total):
+    """Mesh a non-planar open member through the Coons patch of its four sides; returns the
+    new interior points (numbered from ``n_total``) and the triangles (global indices)."""
+    if m.loop is not None:
+        raise LayoutError(f"member '{m.name}' is non-planar and closed; a closed (full-chord) member must be planar")
+    U, L = m.upper, m.lower
+    sides = []
+    for e in (0, 1):
+        jx = m.closing[e]
+        ln = junctions[jx].nodes if jx is not None else m.end_lines[e]
+        a = L[0] if e == 0 else L[-1]
+        if ln is None:
+            raise LayoutError(f"member '{m.name}' is non-planar with a zero-length side; give it four sides")
+        if ln[0] != a:
+            ln = ln[::-1]
+        sides.append(ln)
+    S, (sl, su, s0, s1) = coons_patch(P[L], P[U], P[sides[0]], P[sides[1]])
+    len_s = 0.5 * (np.linalg.norm(np.diff(P[U], axis=0), axis=1).sum()
+                   + np.linalg.norm(np.diff(P[L], axis=0), axis=1).sum())
+    len_t = 0.5 * (np.linalg.norm(np.diff(P[sides[0]], axis=0), axis=1).sum()
+                   + np.linalg.norm(np.diff(P[sides[1]], axis=0), axis=1).sum())
+    nodes = np.concatenate([L, sides[1][1:-1], U[::-1], sides[0][1:-1][::-1]])
+    uv = np.vstack([np.stack([sl * len_s, np.zeros_like(sl)], 1),
+                    np.stack([np.full(len(s1) - 2, len_s), s1[1:-1] * len_t], 1),
+                    np.stack([su[::-1] * len_s, np.full(len(su), len_t)], 1),
+                    np.stack([np.zeros(len(s0) - 2), s0[1:-1][::-1] * len_t], 1)])
+    nb = len(nodes)
+    seg = np.stack([np.arange(nb), (np.arange(nb) + 1) % nb], 1)
+    uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'")
+    st = uv_all[nb:]
+    newp = S(st[:, 0] / len_s, st[:, 1] / len_t) if len(st) else np.zeros((0, 3))
+    gid = np.concatenate([nodes, n_total + np.arange(len(st))])
+    return newp, gid[tris]
+
+
+# ============================================================================ report
+def member_statistics(mesh: ShellMesh, members_info) -> dict:
+    """Per member: ``{name: {"nodes": n, "elements": m, "pieces": [component names]}}`` from
+    the faces whose component is the member or one of its ``seg_<j>`` pieces."""
+    names = [m.name if hasattr(m, "name") else str(m) for m in members_info]
+    cn = mesh.component_names
+    out = {}
+    for nm in names:                                   # loop over members
+        ids = [i for i, c in enumerate(cn) if c == nm or c.startswith(nm + "/seg_")]
+        sel = np.isin(mesh.component, ids)
+        f = mesh.faces[sel]
+        present = sorted({cn[i] for i in np.unique(mesh.component[sel])})
+        out[nm] = {"nodes": int(len(np.unique(f[f >= 0]))), "elements": int(sel.sum()), "pieces": present}
+    return out
