@@ -110,6 +110,7 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
     ``(P, T, comp, vertex_index)``.
     """
     x = np.asarray(x, float)
+    insert_point.last_split = None
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
     cen = (a + b + c) / 3
     # candidate triangles: nearest centroids, then exact point-triangle distance
@@ -152,6 +153,7 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
             keep[g] = False
         T = np.vstack([T[keep], np.asarray(newT, T.dtype)])
         comp = np.concatenate([comp[keep], np.asarray(newC, comp.dtype)])
+        insert_point.last_split = (min(u, v), max(u, v))
         return P, T, comp, n
     t = tri
     newT = np.array([[t[0], t[1], n], [t[1], t[2], n], [t[2], t[0], n]], T.dtype)
@@ -489,6 +491,7 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     #    member's plane ON that member's arc (a middle spar crossing a rib); deduplicated
     cand = [a.points[[0, -1]] for a in arcs if not a.closed]
     cand += _arc_crossings(chains, arcs, eps)
+    cand += _arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps)
     P, T, C = skin.points.copy(), skin.faces[:, :3].copy(), skin.component.copy()
     names = list(skin.component_names)
     fixed = np.zeros(len(P), bool)
@@ -518,6 +521,10 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             movable = ~(fixed | feat_v)
             P, T, C, vid = insert_point(P, T, C, Xu[k], movable)
             cross_ids[k] = vid
+            if insert_point.last_split is not None:
+                f2, i2 = _split_feature_edges(np.vstack(fe), np.concatenate(fid),
+                                              np.array([insert_point.last_split]), np.array([vid]))
+                fe, fid = [f2], [i2]
             grow = len(P) - len(fixed)
             fixed = np.concatenate([fixed, np.zeros(grow, bool)])
             feat_v = np.concatenate([feat_v, np.zeros(grow, bool)])
@@ -579,6 +586,44 @@ def _split_edges_between(P, T, C, verts, locator):
     P = np.vstack([P, mid])
     T, C = _split_hanging(P, T, C, e, new_id)
     return P, T, C
+
+
+def _arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps):
+    """Arc points lying on a sharp edge of the input surface (a trailing edge, a tip cap
+    edge) where the skin has a feature line: the chain and the feature line must share a
+    vertex there. Arc points are exact points of input edges, so the test is exact."""
+    if not len(skin.feature_edges) or not (skin.feature_edge_ids < 0).any():
+        return []
+    lines = ShellMesh(surface_points, surface_tris).sharp_edges()
+    if not len(lines):
+        return []
+    out = []
+    a, b = surface_points[lines[:, 0]], surface_points[lines[:, 1]]
+    for arc in arcs:
+        pts = arc.points if arc.closed else arc.points[1:-1]
+        if not len(pts):
+            continue
+        x = _on_segments(pts, a, b, eps)
+        if len(x):
+            out.append(x)
+    return out
+
+
+def _on_segments(q, a, b, eps):
+    """Points of q within eps of any segment a-b."""
+    tree = cKDTree(0.5 * (a + b))
+    reach = 0.5 * np.linalg.norm(b - a, axis=1).max() + eps
+    cand = tree.query_ball_point(q, reach)
+    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
+    if not cnt.sum():
+        return np.zeros((0, 3))
+    qi = np.repeat(np.arange(len(q)), cnt)
+    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
+    ab = b[si] - a[si]
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab) / np.where(L2 > 0, L2, 1.0), 0, 1)
+    d = np.linalg.norm(a[si] + t[:, None] * ab - q[qi], axis=1)
+    return q[np.unique(qi[d <= eps])]
 
 
 def _arc_crossings(chains, arcs, eps):
@@ -728,4 +773,246 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
                     comp[mask] = len(names)
                     names.append(f"{w.name}/{side}_skin/bay_{k}")
     return ShellMesh(mesh.points, mesh.faces, comp, names, mesh.fixed_vertices, mesh.feature_edges,
+                     mesh.feature_edge_ids)
+
+
+def _tri_min_angles(P, T):
+    return _tri_angles_min(P, T)
+
+
+def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
+    """One round of angle-improving edge flips on an independent set of edges.
+
+    An interior edge shared by exactly two triangles, not locked (chain/feature), is flipped
+    when the new pair's minimum angle beats the old by ``min_gain`` degrees, the two
+    triangles are nearly coplanar (dihedral below ``max_dihedral``), both new triangles keep
+    the old orientation and the new edge does not exist yet. Returns ``(T, n_flipped)``."""
+    a, b = T, np.roll(T, -1, axis=1)
+    lo, hi = np.minimum(a, b).ravel(), np.maximum(a, b).ravel()
+    n = len(P)
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    same = np.flatnonzero(ks[1:] == ks[:-1])
+    if not len(same):
+        return T, 0
+    # keep only edges with exactly two half-edges
+    cnt = np.bincount(np.searchsorted(np.unique(ks), ks))
+    uk = np.unique(ks)
+    two = np.isin(ks[same], uk[cnt == 2])
+    same = same[two]
+    h0, h1 = order[same], order[same + 1]
+    ek = key[h0]
+    if len(locked_edges):
+        lk = np.sort(np.asarray(locked_edges), axis=1)
+        lk = lk[:, 0] * n + lk[:, 1]
+        free = ~np.isin(ek, lk)
+        h0, h1, ek = h0[free], h1[free], ek[free]
+    f0, s0 = h0 // 3, h0 % 3
+    f1, s1 = h1 // 3, h1 % 3
+    # triangle f0 = (p, q, r) with edge p->q at side s0; f1 has q->p; opposite vertices r, s
+    p = T[f0, s0]
+    q = T[f0, (s0 + 1) % 3]
+    r = T[f0, (s0 + 2) % 3]
+    s = T[f1, (s1 + 2) % 3]
+    ok = (T[f1, s1] == q) & (T[f1, (s1 + 1) % 3] == p) & (r != s)
+    p, q, r, s, f0, f1, ek = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok], ek[ok]
+    n0 = np.cross(P[q] - P[p], P[r] - P[p])
+    n1 = np.cross(P[p] - P[q], P[s] - P[q])
+    old_min = np.minimum(_tri_min_angles(P, np.stack([p, q, r], 1)), _tri_min_angles(P, np.stack([q, p, s], 1)))
+    t0 = np.stack([r, s, q], 1)
+    t1 = np.stack([s, r, p], 1)
+    new_min = np.minimum(_tri_min_angles(P, t0), _tri_min_angles(P, t1))
+    nn0 = np.cross(P[t0[:, 1]] - P[t0[:, 0]], P[t0[:, 2]] - P[t0[:, 0]])
+    nn1 = np.cross(P[t1[:, 1]] - P[t1[:, 0]], P[t1[:, 2]] - P[t1[:, 0]])
+    navg = n0 / np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-300) + \
+        n1 / np.maximum(np.linalg.norm(n1, axis=1, keepdims=True), 1e-300)
+    cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1), 1e-300)
+    good = (new_min > old_min + min_gain) & (cosd > np.cos(np.radians(max_dihedral)))
+    good &= (np.einsum("ij,ij->i", nn0, navg) > 0) & (np.einsum("ij,ij->i", nn1, navg) > 0)
+    new_key = np.minimum(r, s) * n + np.maximum(r, s)
+    good &= ~np.isin(new_key, uk)
+    cand = np.flatnonzero(good)
+    if not len(cand):
+        return T, 0
+    # independent set: best gain first, each triangle used once
+    cand = cand[np.argsort(-(new_min - old_min)[cand], kind="stable")]
+    used = np.zeros(len(T), bool)
+    take = []
+    # greedy over candidates sorted by gain; vectorised in passes
+    while len(cand):
+        fa, fb = f0[cand], f1[cand]
+        free = ~used[fa] & ~used[fb]
+        cand = cand[free]
+        if not len(cand):
+            break
+        fa, fb = f0[cand], f1[cand]
+        # first occurrence of each triangle among the remaining, in gain order
+        tri_all = np.concatenate([fa, fb])
+        pos = np.concatenate([np.arange(len(cand)), np.arange(len(cand))])
+        firstpos = np.full(len(T), len(cand))
+        np.minimum.at(firstpos, tri_all, pos)
+        win = (firstpos[fa] == np.arange(len(cand))) & (firstpos[fb] == np.arange(len(cand)))
+        take.append(cand[win])
+        used[fa[win]] = True
+        used[fb[win]] = True
+        cand = cand[~win]
+    take = np.concatenate(take) if take else np.zeros(0, np.int64)
+    # new keys must be unique among the flips taken
+    nk = new_key[take]
+    _, first = np.unique(nk, return_index=True)
+    take = take[np.sort(first)]
+    T = T.copy()
+    T[f0[take]] = t0[take]
+    T[f1[take]] = t1[take]
+    return T, len(take)
+
+
+def _vertex_star(T, n):
+    """CSR vertex -> incident triangles."""
+    v = T.ravel()
+    f = np.repeat(np.arange(len(T)), 3)
+    order = np.argsort(v, kind="stable")
+    ptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(v, minlength=n), out=ptr[1:])
+    return ptr, f[order]
+
+
+def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
+    """Move each movable vertex towards the area-weighted centroid of its star (tangential,
+    then onto the input surface); chain vertices (``chain_of[v] >= 0``) move towards the
+    midpoint of their chain neighbours, projected onto their exact arc. A move is kept only
+    if it raises the smallest angle of the vertex's star and flips no triangle; moves are
+    applied on an independent set (no two moved vertices share a triangle)."""
+    n = len(P)
+    ptr, star = _vertex_star(T, n)
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    cen = (a + b + c) / 3
+    nrm = np.cross(b - a, c - a)
+    area = 0.5 * np.linalg.norm(nrm, axis=1)
+    cand = np.flatnonzero(movable & (np.diff(ptr) > 0))
+    if not len(cand):
+        return P, 0
+    rows = np.repeat(cand, np.diff(ptr)[cand])
+    tris = star[_ranges(ptr[cand], ptr[cand + 1])]
+    w = area[tris]
+    tgt = np.zeros((n, 3))
+    wsum = np.bincount(rows, weights=w, minlength=n)
+    for d in range(3):
+        tgt[:, d] = np.bincount(rows, weights=w * cen[tris, d], minlength=n)
+    tgt[cand] /= np.maximum(wsum[cand], 1e-300)[:, None]
+    vn = np.zeros((n, 3))
+    for d in range(3):
+        vn[:, d] = np.bincount(rows, weights=nrm[tris, d], minlength=n)
+    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+    new = P.copy()
+    mv = tgt[cand] - P[cand]
+    mv -= np.einsum("ij,ij->i", mv, vn[cand])[:, None] * vn[cand]
+    new[cand] = P[cand] + step * mv
+    surf = cand if chain_of is None else cand[chain_of[cand] < 0]
+    if len(surf):
+        new[surf] = locator.closest(new[surf])[0]
+    if chain_of is not None:
+        for cid in np.unique(chain_of[cand][chain_of[cand] >= 0]):
+            vv = cand[chain_of[cand] == cid]
+            new[vv] = closest_on_polyline(new[vv], arcs[cid].points, arcs[cid].closed)
+    # evaluate each vertex's star with only that vertex moved
+    Tm = T[tris]
+    which = Tm == rows[:, None]
+    pa = np.where(which[:, 0, None], new[rows], P[Tm[:, 0]])
+    pb = np.where(which[:, 1, None], new[rows], P[Tm[:, 1]])
+    pc = np.where(which[:, 2, None], new[rows], P[Tm[:, 2]])
+    Pn = np.stack([pa, pb, pc], 1)
+    ang_new = _angles3(Pn)
+    ang_old = _tri_min_angles(P, Tm)
+    nn = np.cross(pb - pa, pc - pa)
+    flip = np.einsum("ij,ij->i", nn, nrm[tris]) <= 0
+    worst_new = np.full(n, np.inf)
+    worst_old = np.full(n, np.inf)
+    np.minimum.at(worst_new, rows, np.where(flip, -1.0, ang_new))
+    np.minimum.at(worst_old, rows, ang_old)
+    ok = cand[worst_new[cand] > worst_old[cand] + 1e-9]
+    if not len(ok):
+        return P, 0
+    # independent set: vertices sharing a triangle cannot both move (lowest-index wins)
+    gain = worst_new - worst_old
+    order = ok[np.argsort(-gain[ok], kind="stable")]
+    take = []
+    tri_taken = np.zeros(len(T), bool)
+    for _ in range(8):
+        if not len(order):
+            break
+        trs = star[_ranges(ptr[order], ptr[order + 1])]
+        pos = np.repeat(np.arange(len(order)), np.diff(ptr)[order])
+        firstpos = np.full(len(T), len(order))
+        np.minimum.at(firstpos, trs, pos)
+        mine = firstpos[trs] == pos
+        allmine = np.bincount(pos, weights=(~mine).astype(float), minlength=len(order)) == 0
+        free = np.bincount(pos, weights=tri_taken[trs].astype(float), minlength=len(order)) == 0
+        win = order[allmine & free]
+        take.append(win)
+        tri_taken[star[_ranges(ptr[win], ptr[win + 1])]] = True
+        order = order[~(allmine & free)]
+    take = np.concatenate(take) if take else np.zeros(0, np.int64)
+    P = P.copy()
+    P[take] = new[take]
+    return P, len(take)
+
+
+def _ranges(starts, stops):
+    """Concatenated aranges [starts[i], stops[i]) (vectorised)."""
+    lens = stops - starts
+    if not len(lens) or lens.sum() == 0:
+        return np.zeros(0, np.int64)
+    idx = np.arange(lens.sum())
+    off = np.repeat(starts - np.concatenate([[0], np.cumsum(lens)[:-1]]), lens)
+    return idx + off
+
+
+def _angles3(Pn):
+    a, b, c = Pn[:, 0], Pn[:, 1], Pn[:, 2]
+
+    def ang(u, v):
+        cu = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
+        return np.degrees(np.arccos(np.clip(cu, -1, 1)))
+
+    return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
+
+
+def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain: float = 0.5) -> ShellMesh:
+    """Raise the smallest angles of the imprinted triangle skin: angle-improving flips of
+    edges that are not chains or feature lines, tangential smoothing of free vertices
+    (projected back onto the input surface) and sliding of chain vertices along their exact
+    arc (crossings and chain ends stay). Every move keeps the vertex on the input surface or
+    on its arc and never flips a triangle."""
+    P = mesh.points.copy()
+    T = mesh.faces[:, :3].copy()
+    n = len(P)
+    locked = mesh.feature_edges
+    chain_of = np.full(n, -1, np.int64)
+    arcs = []
+    ends = np.zeros(n, bool)
+    for i, c in enumerate(chains):
+        v = c.vertices
+        inner = v if c.arc.closed else v[1:-1]
+        chain_of[inner] = np.where(chain_of[inner] >= 0, -2, i)       # -2: on two chains (crossing)
+        if not c.arc.closed:
+            ends[v[[0, -1]]] = True
+        arcs.append(c.arc)
+    feat_v = np.zeros(n, bool)
+    feat_v[mesh.feature_edges[mesh.feature_edge_ids < 0].ravel()] = True
+    crossing = (chain_of == -2) | ends
+    movable = ~crossing & ~feat_v
+    # vertices fixed by the caller that are not chain vertices stay fixed
+    extra_fixed = np.zeros(n, bool)
+    extra_fixed[mesh.fixed_vertices] = True
+    movable &= ~(extra_fixed & (chain_of < 0))
+    chain_of = np.where(chain_of == -2, -1, chain_of)
+    for _ in range(rounds):
+        T, nf = _flip_round(P, T, locked, min_gain=min_gain)
+        P, nm = _smooth_round(P, T, movable, locator, chain_of, arcs)
+        if nf == 0 and nm == 0:
+            break
+    # reorder faces as given (flips keep face slots), keep component per slot
+    return ShellMesh(P, T, mesh.component, mesh.component_names, mesh.fixed_vertices, mesh.feature_edges,
                      mesh.feature_edge_ids)

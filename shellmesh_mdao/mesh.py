@@ -302,6 +302,18 @@ class ShellMesh:
         t = self.topology()
         return t.edges[t.nonmanifold]
 
+    def sharp_edges(self, angle: float = 30.0) -> np.ndarray:
+        """(k, 2) node pairs of the manifold edges whose two faces' normals differ by more
+        than ``angle`` degrees (creases: trailing edges, tip caps), plus open boundary edges."""
+        topo = self.topology()
+        nrm = self.face_normals()
+        two = np.flatnonzero(topo.valence == 2)
+        f0 = topo.edge_faces[topo.edge_faces_ptr[two]]
+        f1 = topo.edge_faces[topo.edge_faces_ptr[two] + 1]
+        cos = np.einsum("ij,ij->i", nrm[f0], nrm[f1])
+        keep = np.concatenate([two[cos < np.cos(np.radians(angle))], np.flatnonzero(topo.valence == 1)])
+        return topo.edges[np.sort(keep)]
+
     def edge_lengths(self) -> np.ndarray:
         e = self.edges()
         return np.linalg.norm(self.points[e[:, 1]] - self.points[e[:, 0]], axis=1)

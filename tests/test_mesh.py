@@ -162,3 +162,12 @@ def test_edge_topology_vectorised_large():
     assert len(t.edges) == 2 * n * (n - 1)
     assert (t.valence == 1).sum() == 4 * (n - 1)
     assert ShellMesh(p, f).n_bodies() == 1
+
+
+def test_sharp_edges_of_cube_and_flat_plate():
+    m = unit_cube()
+    assert len(m.sharp_edges(30.0)) == 12            # every cube edge is a 90-degree crease
+    assert len(m.sharp_edges(95.0)) == 0
+    plate = ShellMesh(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), [[0, 1, 2], [0, 2, 3]])
+    # flat: no crease; the 4 open boundary edges are reported
+    assert sorted(map(tuple, plate.sharp_edges().tolist())) == [(0, 1), (0, 3), (1, 2), (2, 3)]
