@@ -89,7 +89,7 @@ def run_pipeline(surface, layout, size, *, until: str = "imprint", progress: boo
     """Run the stages up to ``until`` on ``surface`` (path or :class:`ShellMesh`) with the member
     ``layout`` (path, dict or :class:`~shellmesh_mdao.layout.Layout`) at target quad size
     ``size``. ``remesh=False`` imprints into the input triangulation as it is (for tests)."""
-    from .imprint import chain_specs, imprint_chains, skin_families
+    from .imprint import chain_specs, improve_skin, imprint_chains, skin_families
     from .layout import load_layout
     from .load import load_surface
     from .project import SurfaceLocator, project_layout
@@ -135,6 +135,7 @@ def run_pipeline(surface, layout, size, *, until: str = "imprint", progress: boo
         return _finish(result)
     with stage("imprint"):
         mesh, chains = imprint_chains(skin, P, T, specs, locator=locator)
+        mesh = improve_skin(mesh, locator, chains)
         mesh = skin_families(mesh, lay)
     result.mesh, result.chains, result.stage = mesh, chains, "imprint"
     members: dict = {}
