@@ -241,7 +241,7 @@ class _Surface:
         self.loc = locator if locator is not None else SurfaceLocator(self.P, self.T)
         if locator is not None and (locator.triangles.shape != self.T.shape):
             self.loc = SurfaceLocator(self.P, self.T)
-        nv, nt = len(self.P), len(self.T)
+        nv = len(self.P)
         self.diag = float(np.linalg.norm(self.P.max(0) - self.P.min(0)))
         self.target = float(target)
         An = _tri_normals(self.P, self.T)
@@ -287,7 +287,6 @@ class _Surface:
         # of a coarsely faceted leading edge): the weaker line is dropped along that
         # stretch; its new ends become corners with a small local size.
         self.n_thin_pairs = 0
-        deg0 = np.bincount(E[isfeat].reshape(-1), minlength=nv)
         for _ in range(3):
             drop = self._thin_pairs(isfeat, border, wedge_angle)
             drop &= ~border
@@ -491,7 +490,6 @@ class _Surface:
                 raise MeshValidationError("feature line extraction failed (disconnected chain); "
                                           "report this input surface")
             # order the chain nodes: each edge contributes its farther end; the start slot opens
-            lo_s = np.minimum(s0, s1)
             hi_s = np.maximum(s0, s1)
             lo_v = np.where(s0 <= s1, FE[:, 0], FE[:, 1])
             hi_v = np.where(s0 <= s1, FE[:, 1], FE[:, 0])
@@ -604,7 +602,6 @@ class _Surface:
         target = self.target
         topo = self.topo
         E = topo.E
-        f0 = topo.h0 // 3
         f1 = np.where(topo.h1 >= 0, topo.h1 // 3, -1)
         delta = self.delta
         h = np.full(nv, target)
@@ -852,9 +849,11 @@ class _Work:
         self.fe = fe
         self.fe_chain = fe_chain
 
+    allow_nonmanifold = False
+
     def topo(self):
         if self._topo is None:
-            self._topo = _Topo(self.F, self.n)
+            self._topo = _Topo(self.F, self.n, allow_nonmanifold=self.allow_nonmanifold)
         return self._topo
 
     def touched(self):
@@ -1119,7 +1118,6 @@ def _collapse_round(W, ctx, max_normal_turn=45.0, quality=False):
     T = W.topo()
     E = T.E
     P = W.P
-    n = W.n
     L = _norm(P[E[:, 1]] - P[E[:, 0]])
     he = 0.5 * (W.h[E[:, 0]] + W.h[E[:, 1]])
     prio = np.where(L < _LO * he, -(L / he), -np.inf)
@@ -2008,14 +2006,8 @@ def improve_triangles(mesh: ShellMesh, locator: SurfaceLocator, *, target_edge: 
     W = _Work(mesh.points.copy(), F, mesh.component[tri].astype(np.int64), kind, np.full(n, np.nan),
               np.full(n, -1, np.int64), np.full(n, -1, np.int64), vtri, fe, np.zeros(len(fe), np.int64),
               np.full(n, float(target_edge)))
-    W._topo = None
-    _Topo_nm = _Topo
-
-    def topo():
-        if W._topo is None:
-            W._topo = _Topo_nm(W.F, W.n, allow_nonmanifold=True)
-        return W._topo
-    W.topo = topo
+    W.allow_nonmanifold = True
+    W.touched()
     for _ in range(max(int(iterations), 0)):
         _phase(_flip_round, W, ctx, 10, "angle")
         if relax:
