@@ -87,8 +87,10 @@ def _print_summary(result):
           f"({c['n_tris']} triangles, {c['n_quads']} quads), {c['n_feature_edges']} chain/feature edges")
     print("seconds per stage: " + ", ".join(f"{k} {v:.2f}" for k, v in r["stages"].items()))
     for name, m in r.get("members", {}).items():
-        print(f"  {name}: " + "; ".join(f"{ch['side']} {ch['n_vertices']} nodes, length {ch['length']:.4g}"
-                                        for ch in m["chains"]))
+        line = "; ".join(f"{ch['side']} chain {ch['n_vertices']} nodes, length {ch['length']:.4g}" for ch in m["chains"])
+        if "elements" in m:
+            line += f"; mesh {m['nodes']} nodes, {m['elements']} elements"
+        print(f"  {name}: {line}")
 
 
 def _cmd_mesh(args) -> int:
@@ -114,7 +116,7 @@ def _cmd_demo(args) -> int:
 
     from .export import write_mesh
     from .geometry import naca_wing, naca_wing_layout
-    from .pipeline import run_pipeline
+    from .pipeline import STAGES, run_pipeline
     from .quality import format_summary, quality_summary
 
     out_dir = Path(args.out_dir)
@@ -126,14 +128,14 @@ def _cmd_demo(args) -> int:
     surface = naca_wing()
     layout = naca_wing_layout()
     write_mesh(surface, out_dir / "default_wing_surface.vtu")
-    result = run_pipeline(surface, layout, args.size, until="imprint", progress=not args.quiet)
+    result = run_pipeline(surface, layout, args.size, until=STAGES[-1], progress=not args.quiet)
     result.report["inputs"]["surface"] = "bundled default wing (shellmesh_mdao.geometry.naca_wing)"
-    _write_outputs(result, out_dir / "default_wing_imprint.vtu", out_dir / "default_wing_report.json")
-    write_mesh(result.mesh, out_dir / "default_wing_imprint.bdf")
+    _write_outputs(result, out_dir / "default_wing_mesh.vtu", out_dir / "default_wing_report.json")
+    write_mesh(result.mesh, out_dir / "default_wing_mesh.bdf")
     _print_summary(result)
     print(format_summary(quality_summary(result.mesh)))     # per family: see the JSON report
-    print(f"outputs in {out_dir}/: default_wing_surface.vtu, default_wing_imprint.vtu, "
-          "default_wing_imprint.bdf, default_wing_report.json")
+    print(f"outputs in {out_dir}/: default_wing_surface.vtu, default_wing_mesh.vtu, "
+          "default_wing_mesh.bdf, default_wing_report.json")
     return 0
 
 

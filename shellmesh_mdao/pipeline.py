@@ -1,6 +1,6 @@
 """The mesh pipeline: one call runs the stages in order and reports on each.
 
-load -> layout -> project -> remesh -> imprint -> (members -> split -> merge -> smooth -> quad) -> export
+load -> layout -> project -> remesh -> imprint -> members -> (split -> merge -> smooth -> quad) -> export
 
 :func:`run_pipeline` is what the CLI (``shellmesh mesh``), ``shellmesh demo`` and the
 OpenMDAO components call. ``until`` stops after a stage; the result is a
@@ -23,7 +23,7 @@ from .mesh import ShellMesh
 log = logging.getLogger("shellmesh_mdao")
 
 #: Stages in order; ``--until`` takes one of these.
-STAGES = ("load", "layout", "project", "remesh", "imprint")
+STAGES = ("load", "layout", "project", "remesh", "imprint", "members")
 
 #: The skin is remeshed at this multiple of the final quad size: merging pairs triangles into
 #: quads and the final subdivision halves every edge.
@@ -144,6 +144,18 @@ def run_pipeline(surface, layout, size, *, until: str = "imprint", progress: boo
         e["chains"].append({"side": c.side, "n_vertices": int(c.n_vertices),
                             "length": float(np.linalg.norm(np.diff(mesh.points[c.vertices], axis=0), axis=1).sum())})
     report["members"] = members
+    if until == "imprint":
+        return _finish(result)
+    from .members import build_members, member_infos, member_statistics
+
+    with stage("members"):
+        infos = member_infos(lay)
+        e = mesh.edges()
+        work = float(np.median(np.linalg.norm(mesh.points[e[:, 0]] - mesh.points[e[:, 1]], axis=1)))
+        mesh = build_members(mesh, chains, infos, work)
+    result.mesh, result.stage = mesh, "members"
+    for name, st in member_statistics(mesh, infos).items():
+        members.setdefault(name, {"chains": []}).update(st)
     return _finish(result)
 
 

@@ -126,3 +126,23 @@ def test_mesh_bad_layout_writes_nothing(wing_files, tmp_path, capsys):
     rc, _, err = run(["mesh", str(surf), "--layout", str(lay), "--size", "0.1", "--out", str(out)], capsys)
     assert rc == 2 and "eta" in err
     assert not out.exists() and not list(tmp_path.glob(".o.vtu*"))
+
+
+def test_mesh_until_members_writes_conforming_mesh_and_report(wing_files, tmp_path, capsys):
+    from shellmesh_mdao.load import load_mesh
+
+    surf, lay = wing_files
+    out, rep = tmp_path / "m.vtu", tmp_path / "r.json"
+    rc, _, err = run(["-q", "mesh", str(surf), "--layout", str(lay), "--size", "0.15", "--out", str(out),
+                      "--report", str(rep), "--until", "members"], capsys)
+    assert rc == 0, err
+    m = load_mesh(out)
+    r = json.loads(rep.read_text())
+    assert r["stage"] == "members" and set(r["stages"]) >= {"load", "remesh", "imprint", "members"}
+    # ribs and spars are in the mesh and share nodes with the skin: junction edges have 3 faces
+    names = set(m.component_names[i] for i in np.unique(m.component))
+    assert {"wing/rib_0", "wing/spar_0", "wing/spar_1"} <= names
+    assert (m.topology().valence == 3).any()
+    c = m.check()
+    assert len(c.duplicate_points) == 0 and len(c.hanging_nodes) == 0
+    assert r["members"]["wing/rib_0"]["elements"] > 0 and r["members"]["wing/rib_0"]["chains"]
