@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, vertex_faces
 from .section import Plane, SectionArc, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain"]
@@ -90,13 +90,8 @@ def closest_on_polyline(q: np.ndarray, poly: np.ndarray, closed: bool = False) -
 
 
 def _tri_angles_min(P, T):
-    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
-
-    def ang(u, v):
-        cu = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
-        return np.degrees(np.arccos(np.clip(cu, -1, 1)))
-
-    return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
+    """Smallest interior angle (degrees) of each triangle ``P[T]``."""
+    return _angles3(P[np.asarray(T)[:, :3]])
 
 
 def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, movable: np.ndarray,
@@ -776,10 +771,6 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
                      mesh.feature_edge_ids)
 
 
-def _tri_min_angles(P, T):
-    return _tri_angles_min(P, T)
-
-
 def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     """One round of angle-improving edge flips on an independent set of edges.
 
@@ -819,10 +810,10 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     p, q, r, s, f0, f1, ek = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok], ek[ok]
     n0 = np.cross(P[q] - P[p], P[r] - P[p])
     n1 = np.cross(P[p] - P[q], P[s] - P[q])
-    old_min = np.minimum(_tri_min_angles(P, np.stack([p, q, r], 1)), _tri_min_angles(P, np.stack([q, p, s], 1)))
+    old_min = np.minimum(_tri_angles_min(P, np.stack([p, q, r], 1)), _tri_angles_min(P, np.stack([q, p, s], 1)))
     t0 = np.stack([r, s, q], 1)
     t1 = np.stack([s, r, p], 1)
-    new_min = np.minimum(_tri_min_angles(P, t0), _tri_min_angles(P, t1))
+    new_min = np.minimum(_tri_angles_min(P, t0), _tri_angles_min(P, t1))
     nn0 = np.cross(P[t0[:, 1]] - P[t0[:, 0]], P[t0[:, 2]] - P[t0[:, 0]])
     nn1 = np.cross(P[t1[:, 1]] - P[t1[:, 0]], P[t1[:, 2]] - P[t1[:, 0]])
     navg = n0 / np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-300) + \
@@ -868,16 +859,6 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     return T, len(take)
 
 
-def _vertex_star(T, n):
-    """CSR vertex -> incident triangles."""
-    v = T.ravel()
-    f = np.repeat(np.arange(len(T)), 3)
-    order = np.argsort(v, kind="stable")
-    ptr = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(v, minlength=n), out=ptr[1:])
-    return ptr, f[order]
-
-
 def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     """Move each movable vertex towards the area-weighted centroid of its star (tangential,
     then onto the input surface); chain vertices (``chain_of[v] >= 0``) move towards the
@@ -885,7 +866,7 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     if it raises the smallest angle of the vertex's star and flips no triangle; moves are
     applied on an independent set (no two moved vertices share a triangle)."""
     n = len(P)
-    ptr, star = _vertex_star(T, n)
+    ptr, star = vertex_faces(T, n)
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
     cen = (a + b + c) / 3
     nrm = np.cross(b - a, c - a)
@@ -924,7 +905,7 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     pc = np.where(which[:, 2, None], new[rows], P[Tm[:, 2]])
     Pn = np.stack([pa, pb, pc], 1)
     ang_new = _angles3(Pn)
-    ang_old = _tri_min_angles(P, Tm)
+    ang_old = _tri_angles_min(P, Tm)
     nn = np.cross(pb - pa, pc - pa)
     flip = np.einsum("ij,ij->i", nn, nrm[tris]) <= 0
     worst_new = np.full(n, np.inf)
@@ -970,6 +951,7 @@ def _ranges(starts, stops):
 
 
 def _angles3(Pn):
+    """Smallest interior angle (degrees) of triangles given by corner coordinates (t, 3, 3)."""
     a, b, c = Pn[:, 0], Pn[:, 1], Pn[:, 2]
 
     def ang(u, v):

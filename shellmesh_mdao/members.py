@@ -47,7 +47,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError, LayoutError, SizeError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, vertex_faces
 from .section import Plane
 
 __all__ = ["MemberInfo", "member_infos", "build_members", "member_statistics", "triangulate_planar",
@@ -933,16 +933,6 @@ def _sub_polyline(p: np.ndarray, cum: np.ndarray, s0: float, s1: float) -> np.nd
     return np.vstack([_arc_point(p, cum, np.array([s0])), p[inner], _arc_point(p, cum, np.array([s1]))])
 
 
-def _skin_vertex_faces(faces: np.ndarray, n: int):
-    f = faces[:, :3]
-    v = f.ravel()
-    fi = np.repeat(np.arange(len(f)), 3)
-    o = np.argsort(v, kind="stable")
-    ptr = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(v, minlength=n), out=ptr[1:])
-    return ptr, fi[o]
-
-
 def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: float = 0.67, rounds: int = 20,
                   min_skin_angle: float = 10.0) -> int:
     """Even out uneven chain spacing by sliding chain vertices along their exact arcs.
@@ -975,7 +965,7 @@ def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: floa
         recs.append((ch, s, p, cum))
     if not recs:
         return 0
-    ptr, vf = _skin_vertex_faces(F, n)
+    ptr, vf = vertex_faces(F, n)
     moved_total = np.zeros(n, bool)
 
     def tri_state(X, fids):

@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError
 
-__all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points"]
+__all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces"]
 
 
 def _as_faces(faces) -> np.ndarray:
@@ -439,6 +439,19 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
     np.cumsum(valence, out=ptr[1:])
     return EdgeTopology(edges.astype(np.int64), face_edges, valence, ptr, he_face[order],
                         he_face, he_side, he_edge, he_from, he_to)
+
+
+def vertex_faces(faces: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR list of the faces around each vertex of a face array ((m, 3) triangles or
+    (m, 4) mixed, -1 padded): ``faces_of_v = idx[ptr[v]:ptr[v + 1]]`` (ascending face order)."""
+    f = np.asarray(faces)
+    valid = f >= 0
+    fi = np.broadcast_to(np.arange(len(f))[:, None], f.shape)[valid]
+    v = f[valid]
+    order = np.argsort(v, kind="stable")
+    ptr = np.zeros(n_points + 1, np.int64)
+    np.cumsum(np.bincount(v, minlength=n_points), out=ptr[1:])
+    return ptr, fi[order]
 
 
 def _inconsistent_edges(topo: EdgeTopology, component: np.ndarray) -> np.ndarray:

@@ -61,7 +61,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 
 __all__ = ["FIXED", "CURVE", "PLANE", "SURFACE", "KIND_NAMES", "Curve", "Supports", "derive_supports",
@@ -751,17 +751,6 @@ def _solve_kkt(K3, rho_v, mesh_n, g, supports, T, owner):
     return sol[:3 * n].reshape(n, 3)
 
 
-def _vertex_faces(faces: np.ndarray, n: int):
-    """CSR vertex -> incident faces."""
-    valid = faces >= 0
-    fi = np.broadcast_to(np.arange(len(faces))[:, None], faces.shape)[valid]
-    vi = faces[valid]
-    o = np.argsort(vi, kind="stable")
-    ptr = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(vi, minlength=n), out=ptr[1:])
-    return ptr, fi[o]
-
-
 def _faces_of(ptr, vf, verts, m):
     """Sorted ids of the faces incident to ``verts`` (CSR ``ptr``/``vf`` of ``m`` faces)."""
     cnt = ptr[verts + 1] - ptr[verts]
@@ -964,7 +953,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     scale = float(np.median(mesh.edge_lengths())) if mesh.n_faces else 1.0
     dof = supports.dof()
     movable = np.flatnonzero(dof > 0)
-    vptr, vface = _vertex_faces(faces, n)
+    vptr, vface = vertex_faces(faces, n)
     method = solver
     if solver == "auto":
         method = "lu" if int(dof.sum()) <= AUTO_LU_MAX_UNKNOWNS else "cg"

@@ -171,3 +171,12 @@ def test_sharp_edges_of_cube_and_flat_plate():
     plate = ShellMesh(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), [[0, 1, 2], [0, 2, 3]])
     # flat: no crease; the 4 open boundary edges are reported
     assert sorted(map(tuple, plate.sharp_edges().tolist())) == [(0, 1), (0, 3), (1, 2), (2, 3)]
+
+
+def test_vertex_faces_mixed():
+    from shellmesh_mdao.mesh import vertex_faces
+
+    f = np.array([[0, 1, 2, 3], [1, 4, 2, -1], [2, 4, 5, -1]])
+    ptr, idx = vertex_faces(f, 6)
+    star = [idx[ptr[v]:ptr[v + 1]].tolist() for v in range(6)]
+    assert star == [[0], [0, 1], [0, 1, 2], [0], [1, 2], [2]]
