@@ -529,7 +529,9 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
                                "than the element size; use a smaller --size or move the members apart")
         # an edge joining two crossing vertices (e.g. the upper and lower crossing of a thin
         # section on a coarse skin) would make the plane run along it: split it
-        P, T, C = _split_edges_between(P, T, C, cross_ids, locator)
+        P, T, C, (split_e, new_n) = _split_edges_between(P, T, C, cross_ids, locator)
+        f2, i2 = _split_feature_edges(np.vstack(fe), np.concatenate(fid), split_e, new_n)
+        fe, fid = [f2], [i2]
         grow = len(P) - len(fixed)
         fixed = np.concatenate([fixed, np.zeros(grow, bool)])
         feat_v = np.concatenate([feat_v, np.zeros(grow, bool)])
@@ -567,20 +569,21 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
 
 def _split_edges_between(P, T, C, verts, locator):
     """Split every edge whose two ends are both in ``verts`` at its midpoint, projected onto
-    the input surface (both incident triangles are split in two)."""
+    the input surface (both incident triangles are split in two). Also returns the split
+    edges and their new nodes (for the feature edges lying on them)."""
     is_v = np.zeros(len(P), bool)
     is_v[verts] = True
     a, b = T, np.roll(T, -1, axis=1)
     hit = is_v[a] & is_v[b]
     if not hit.any():
-        return P, T, C
+        return P, T, C, (np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
     e = np.unique(np.sort(np.stack([a[hit], b[hit]], 1), axis=1), axis=0)
     mid = 0.5 * (P[e[:, 0]] + P[e[:, 1]])
     mid = locator.closest(mid)[0]
     new_id = len(P) + np.arange(len(e))
     P = np.vstack([P, mid])
     T, C = _split_hanging(P, T, C, e, new_id)
-    return P, T, C
+    return P, T, C, (e, new_id)
 
 
 def _arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps):

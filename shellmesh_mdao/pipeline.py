@@ -1,14 +1,19 @@
-"""The mesh pipeline: one call runs the stages in order and reports on each.
+"""The mesh pipeline: the stages in order, one function each, and one call that runs them.
 
-load -> layout -> project -> remesh -> imprint -> members -> (split -> merge -> smooth -> quad) -> export
+load -> layout -> project -> remesh -> imprint -> members -> split -> merge -> smooth -> quad -> export
 
-:func:`run_pipeline` is what the CLI (``shellmesh mesh``), ``shellmesh demo`` and the
-OpenMDAO components call. ``until`` stops after a stage; the result is a
-:class:`PipelineResult` with the mesh of the last stage run, the chains, and a JSON
-report (inputs, seconds per stage, components, counts, per-member chain figures).
+Each stage is a function ``stage_<name>(state)`` that takes a :class:`PipelineState` and returns
+a new one (the input state is not modified), so the OpenMDAO components
+(:mod:`shellmesh_mdao.components`) can pass the state between them as a discrete variable and
+re-run only the stages downstream of a changed input. :func:`run_pipeline` is what the CLI
+(``shellmesh mesh``), ``shellmesh demo`` and the studies call: it runs the stages up to
+``until`` and returns a :class:`PipelineResult` with the mesh of the last stage run, the chains
+and a JSON report (inputs, seconds per stage, components, counts, per-member figures, solver
+statuses).
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import sys
 import time
@@ -23,11 +28,93 @@ from .mesh import ShellMesh
 log = logging.getLogger("shellmesh_mdao")
 
 #: Stages in order; ``--until`` takes one of these.
-STAGES = ("load", "layout", "project", "remesh", "imprint", "members")
+STAGES = ("load", "layout", "project", "remesh", "imprint", "members", "split", "merge", "smooth", "quad")
 
 #: The skin is remeshed at this multiple of the final quad size: merging pairs triangles into
 #: quads and the final subdivision halves every edge.
 REMESH_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class PipelineOptions:
+    """Options of the stages after ``load`` (the CLI's and the components' solver options).
+
+    ``remesh``            remesh the skin before imprinting (False: imprint into the input
+                          triangulation as it is; for tests).
+    ``split_time_limit``  HiGHS time limit (s) of the splitting LP/MIP.
+    ``merge_time_limit``, ``merge_mip_gap``: HiGHS time limit (s) and relative gap of the
+                          merging MIP.
+    ``merge_bonus``       reward per merged triangle pair (in units of the eq.-5 energy): above
+                          0 the MIP prefers quads even where two triangles score slightly better,
+                          which leaves fewer triangles for the final subdivision (each gives
+                          three 120-degree-cornered quads).
+    ``smooth_iterations`` trust-region steps of the smoothing QP before subdivision;
+                          ``final_iterations`` after it.
+    ``guard_jacobian``    a subdivided element whose projected new nodes would bring its scaled
+                          Jacobian to or below this keeps them at their linear position.
+    ``smooth_jacobian``   no smoothing step before subdivision may bring an element to or below
+                          this scaled Jacobian (nor lower one already below it).
+    """
+
+    remesh: bool = True
+    split_time_limit: float = 60.0
+    merge_time_limit: float = 60.0
+    merge_mip_gap: float = 0.01
+    merge_bonus: float = 1.0
+    smooth_iterations: int = 10
+    final_iterations: int = 10
+    guard_jacobian: float = 0.2
+    smooth_jacobian: float = 0.4
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "PipelineOptions":
+        """Options from a dict; unknown names are a :class:`ShellMeshError` naming them."""
+        if d is None:
+            return cls()
+        if isinstance(d, PipelineOptions):
+            return d
+        known = {f.name: f for f in dataclasses.fields(cls)}
+        bad = sorted(set(d) - set(known))
+        if bad:
+            raise ShellMeshError(f"unknown solver option(s) {bad}; known: {', '.join(known)}")
+        out = {}
+        for k, v in d.items():
+            typ = type(getattr(cls(), k))
+            try:
+                out[k] = typ(v) if typ is not bool else bool(v)
+            except (TypeError, ValueError):
+                raise ShellMeshError(f"solver option {k!r} must be a {typ.__name__}, got {v!r}") from None
+            if typ in (int, float) and not (np.isfinite(out[k]) and out[k] >= 0):
+                raise ShellMeshError(f"solver option {k!r} must be a finite non-negative number, got {v!r}")
+        return cls(**out)
+
+
+@dataclass(frozen=True)
+class PipelineState:
+    """What travels between stages. ``stage`` is the last stage run; fields a stage has not
+    produced yet are None. ``mesh`` is the current mesh (the skin until ``members``, then skin
+    and members together); ``surface`` and ``locator`` are the ORIGINAL input skin and its BVH;
+    ``supports`` say where each node of ``mesh`` may move (from ``split`` on)."""
+
+    size: float
+    options: PipelineOptions
+    report: dict
+    surface: ShellMesh | None = None
+    locator: object = None
+    layout: object = None
+    projected: dict | None = None
+    specs: list | None = None
+    mesh: ShellMesh | None = None
+    chains: list = field(default_factory=list)
+    infos: list | None = None
+    supports: object = None
+    stage: str = ""
+
+    def but(self, **kw) -> "PipelineState":
+        """A copy with some fields replaced (the report is copied one level deep)."""
+        rep = dict(self.report)
+        rep["stages"] = dict(self.report.get("stages", {}))
+        return dataclasses.replace(self, report=rep, **kw)
 
 
 @dataclass
@@ -38,17 +125,17 @@ class PipelineResult:
     layout: object = None
     chains: list = field(default_factory=list)
     stage: str = ""
+    state: PipelineState | None = None
 
 
 class _Stages:
     """Times stages and shows a spinner on a terminal for stages longer than a second."""
 
     def __init__(self, progress: bool):
-        self.seconds: dict[str, float] = {}
         self.progress = progress and sys.stderr.isatty()
 
     @contextmanager
-    def __call__(self, name: str):
+    def __call__(self, name: str, seconds: dict):
         t0 = time.perf_counter()
         status = None
         if self.progress:
@@ -62,7 +149,7 @@ class _Stages:
             if status is not None:
                 status.stop()
             dt = time.perf_counter() - t0
-            self.seconds[name] = round(dt, 4)
+            seconds[name] = round(dt, 4)
             log.info("%-8s %8.2f s", name, dt)
 
 
@@ -84,79 +171,216 @@ def check_size(size, diagonal: float) -> float:
     return h
 
 
-def run_pipeline(surface, layout, size, *, until: str = "imprint", progress: bool = True,
-                 remesh: bool = True) -> PipelineResult:
-    """Run the stages up to ``until`` on ``surface`` (path or :class:`ShellMesh`) with the member
-    ``layout`` (path, dict or :class:`~shellmesh_mdao.layout.Layout`) at target quad size
-    ``size``. ``remesh=False`` imprints into the input triangulation as it is (for tests)."""
-    from .imprint import chain_specs, improve_skin, imprint_chains, skin_families
-    from .layout import load_layout
+def _need(state: PipelineState, stage: str) -> None:
+    i = STAGES.index(stage)
+    cur = STAGES.index(state.stage) if state.stage in STAGES else -1
+    if cur < i - 1:
+        raise ShellMeshError(f"stage '{stage}' needs the output of stage '{STAGES[i - 1]}' (the state is at "
+                             f"'{state.stage or 'nothing'}'); run the stages in order: {' -> '.join(STAGES)}")
+
+
+# ============================================================================ stages
+def stage_load(surface, size, options=None) -> PipelineState:
+    """Read the input skin (path or :class:`ShellMesh`), check ``size`` against it, split any
+    quads into triangles and build its BVH locator."""
     from .load import load_surface
-    from .project import SurfaceLocator, project_layout
+    from .project import SurfaceLocator
+
+    opts = PipelineOptions.from_dict(options)
+    report: dict = {"inputs": {"surface": str(surface) if not isinstance(surface, ShellMesh) else "<mesh>",
+                               "size": size, "options": dataclasses.asdict(opts)}, "stages": {}}
+    if isinstance(surface, ShellMesh):
+        skin_in = surface
+    else:
+        skin_in, srep = load_surface(surface)
+        report["surface"] = srep.to_dict()
+    h = check_size(size, skin_in.diagonal)
+    if skin_in.n_quads:
+        tris, _ = skin_in.triangles()
+        skin_in = ShellMesh(skin_in.points, tris, np.zeros(len(tris), np.int32), ["skin"])
+    locator = SurfaceLocator(skin_in.points, skin_in.faces[:, :3])
+    return PipelineState(h, opts, report, surface=skin_in, locator=locator, mesh=skin_in, stage="load")
+
+
+def stage_layout(state: PipelineState, layout) -> PipelineState:
+    """Read and validate the member layout (path, dict or :class:`~shellmesh_mdao.layout.Layout`)."""
+    from .layout import load_layout
+    from .members import member_infos
+
+    lay = load_layout(layout)
+    lay.validate(state.size)
+    st = state.but(layout=lay, infos=member_infos(lay), stage="layout")
+    st.report["inputs"]["layout"] = lay.to_dict()
+    return st
+
+
+def stage_project(state: PipelineState) -> PipelineState:
+    """Cast every member's seed points onto the input skin and derive the curves to imprint."""
+    from .imprint import chain_specs
+    from .project import project_layout
+
+    _need(state, "project")
+    projected = project_layout(state.locator, state.layout)
+    return state.but(projected=projected, specs=chain_specs(state.layout, projected), stage="project")
+
+
+def stage_remesh(state: PipelineState) -> PipelineState:
+    """Isotropic, curvature-adapted remesh of the skin at ``REMESH_FACTOR * size``."""
     from .remesh import remesh_skin
 
-    if until not in STAGES:
-        raise ShellMeshError(f"unknown stage {until!r}; --until takes one of: {', '.join(STAGES)}")
-    stage = _Stages(progress)
-    report: dict = {"inputs": {"surface": str(surface) if not isinstance(surface, ShellMesh) else "<mesh>",
-                               "size": size, "until": until}, "stages": stage.seconds}
-    with stage("load"):
-        if isinstance(surface, ShellMesh):
-            skin_in = surface
-        else:
-            skin_in, srep = load_surface(surface)
-            report["surface"] = srep.to_dict()
-        h = check_size(size, skin_in.diagonal)
-        if skin_in.n_quads:
-            tris, _ = skin_in.triangles()
-            skin_in = ShellMesh(skin_in.points, tris, np.zeros(len(tris), np.int32), ["skin"])
-    result = PipelineResult(skin_in, report, surface=skin_in, stage="load")
-    if until == "load":
-        return _finish(result)
-    with stage("layout"):
-        lay = load_layout(layout)
-        lay.validate(h)
-        report["inputs"]["layout"] = lay.to_dict()
-    result.layout, result.stage = lay, "layout"
-    if until == "layout":
-        return _finish(result)
-    with stage("project"):
-        P, T = skin_in.points, skin_in.faces[:, :3]
-        locator = SurfaceLocator(P, T)
-        projected = project_layout(locator, lay)
-        specs = chain_specs(lay, projected)
-    result.stage = "project"
-    if until == "project":
-        return _finish(result)
-    with stage("remesh"):
-        skin = remesh_skin(skin_in, REMESH_FACTOR * h, locator=locator) if remesh else skin_in
-    result.mesh, result.stage = skin, "remesh"
-    if until == "remesh":
-        return _finish(result)
-    with stage("imprint"):
-        mesh, chains = imprint_chains(skin, P, T, specs, locator=locator)
-        mesh = improve_skin(mesh, locator, chains)
-        mesh = skin_families(mesh, lay)
-    result.mesh, result.chains, result.stage = mesh, chains, "imprint"
+    _need(state, "remesh")
+    skin = state.surface
+    if state.options.remesh:
+        skin = remesh_skin(state.surface, REMESH_FACTOR * state.size, locator=state.locator)
+    return state.but(mesh=skin, stage="remesh")
+
+
+def stage_imprint(state: PipelineState) -> PipelineState:
+    """Imprint every member's curves into the skin as chains of edges; name the skin bays."""
+    from .imprint import improve_skin, imprint_chains, skin_families
+
+    _need(state, "imprint")
+    P, T = state.surface.points, state.surface.faces[:, :3]
+    mesh, chains = imprint_chains(state.mesh, P, T, state.specs, locator=state.locator)
+    mesh = improve_skin(mesh, state.locator, chains)
+    mesh = skin_families(mesh, state.layout)
+    st = state.but(mesh=mesh, chains=chains, stage="imprint")
     members: dict = {}
     for c in chains:
         e = members.setdefault(c.member, {"chains": []})
         e["chains"].append({"side": c.side, "n_vertices": int(c.n_vertices),
                             "length": float(np.linalg.norm(np.diff(mesh.points[c.vertices], axis=0), axis=1).sum())})
-    report["members"] = members
-    if until == "imprint":
-        return _finish(result)
-    from .members import build_members, member_infos, member_statistics
+    st.report["members"] = members
+    return st
 
-    with stage("members"):
-        infos = member_infos(lay)
-        e = mesh.edges()
-        work = float(np.median(np.linalg.norm(mesh.points[e[:, 0]] - mesh.points[e[:, 1]], axis=1)))
-        mesh = build_members(mesh, chains, infos, work)
-    result.mesh, result.stage = mesh, "members"
-    for name, st in member_statistics(mesh, infos).items():
-        members.setdefault(name, {"chains": []}).update(st)
-    return _finish(result)
+
+def stage_members(state: PipelineState) -> PipelineState:
+    """Mesh every member (planar Delaunay or Coons patch) on its chains; split members at
+    their junctions; one conforming triangle mesh of skin and members."""
+    from .members import build_members, member_statistics
+
+    _need(state, "members")
+    # members are flat or gently curved: meshed at the skin's flat-region edge length, graded
+    # to the chain spacing at their boundary
+    mesh = build_members(state.mesh, state.chains, state.infos, REMESH_FACTOR * state.size)
+    st = state.but(mesh=mesh, stage="members")
+    members = {k: dict(v) for k, v in st.report.get("members", {}).items()}
+    for name, s in member_statistics(mesh, state.infos).items():
+        members.setdefault(name, {"chains": []}).update(s)
+    st.report["members"] = members
+    return st
+
+
+def stage_split(state: PipelineState) -> PipelineState:
+    """Splitting LP (paper eq. 1-3) on the whole mesh; chains, junctions and feature lines are
+    never split. Derives the node supports (input skin, member planes, feature curves)."""
+    from .smooth import edge_midpoint_projector, pipeline_supports
+    from .split import split_polygons
+
+    _need(state, "split")
+    sup = pipeline_supports(state.mesh, state.locator, state.infos)
+    mesh, res = split_polygons(state.mesh, time_limit=state.options.split_time_limit,
+                               project=edge_midpoint_projector(state.mesh, sup))
+    sup = pipeline_supports(mesh, state.locator, state.infos)
+    st = state.but(mesh=mesh, supports=sup, stage="split")
+    st.report["split"] = {"status": res.status, "objective": float(res.objective), "used_mip": bool(res.used_mip),
+                          "n_split_edges": int(res.n_split_edges), "seconds": round(res.seconds, 4)}
+    return st
+
+
+def stage_merge(state: PipelineState) -> PipelineState:
+    """Triangle-merging MIP (paper eq. 4-5) on the whole mesh."""
+    from .merge import merge_triangles
+    from .smooth import pipeline_supports
+
+    _need(state, "merge")
+    o = state.options
+    mesh, res = merge_triangles(state.mesh, time_limit=o.merge_time_limit, mip_gap=o.merge_mip_gap,
+                                merge_bonus=o.merge_bonus)
+    sup = pipeline_supports(mesh, state.locator, state.infos)
+    st = state.but(mesh=mesh, supports=sup, stage="merge")
+    st.report["merge"] = {"status": res.status, "objective": float(res.objective), "mip_gap": float(res.mip_gap),
+                          "n_merged": int(res.n_merged), "n_candidates": int(res.n_candidates),
+                          "quad_fraction": round(float(res.quad_fraction), 4), "seconds": round(res.seconds, 4)}
+    return st
+
+
+def stage_smooth(state: PipelineState) -> PipelineState:
+    """Smoothing QP (paper eq. 6-8): tangent-plane steps, KKT solve, projection back onto the
+    input skin / member planes / feature curves; no step folds an element."""
+    from .smooth import smooth
+
+    _need(state, "smooth")
+    # a triangle's scaled Jacobian bounds its three child quads' after subdivision: keep every
+    # element above smooth_jacobian (0.4: triangle angles >= ~20 deg, children above ~0.3)
+    mesh, res = smooth(state.mesh, state.supports, iterations=state.options.smooth_iterations,
+                       min_jacobian=state.options.smooth_jacobian)
+    st = state.but(mesh=mesh, stage="smooth")
+    st.report["smooth"] = _smooth_report(res)
+    return st
+
+
+def stage_quad(state: PipelineState) -> PipelineState:
+    """One subdivision to all quads (quad -> 4, triangle -> 3) over skin and members, new nodes
+    projected onto their supports, then a final smoothing pass."""
+    from .quad import subdivide_to_quads
+    from .smooth import smooth
+
+    _need(state, "quad")
+    o = state.options
+    q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
+    if o.final_iterations:
+        q, res = smooth(q, sup, iterations=o.final_iterations)
+    st = state.but(mesh=q, supports=sup, stage="quad")
+    if o.final_iterations:
+        st.report["final_smooth"] = _smooth_report(res)
+    return st
+
+
+def _smooth_report(res) -> dict:
+    return {"iterations": int(res.iterations), "seconds": round(res.seconds, 4), "max_move": float(res.max_move),
+            "n_rejected": int(res.n_rejected), "quality_before": res.quality_before,
+            "quality_after": res.quality_after}
+
+
+_STAGE_FUNCS = {"project": stage_project, "remesh": stage_remesh, "imprint": stage_imprint,
+                "members": stage_members, "split": stage_split, "merge": stage_merge, "smooth": stage_smooth,
+                "quad": stage_quad}
+
+
+def run_stage(state: PipelineState, name: str) -> PipelineState:
+    """Run stage ``name`` (one after ``layout``) on ``state``, timing it into the report."""
+    if name not in _STAGE_FUNCS:
+        raise ShellMeshError(f"unknown stage {name!r}; run_stage takes one of: {', '.join(_STAGE_FUNCS)}")
+    seconds: dict = {}
+    with _Stages(False)(name, seconds):
+        st = _STAGE_FUNCS[name](state)
+    st.report["stages"][name] = seconds[name]
+    return st
+
+
+def run_pipeline(surface, layout, size, *, until: str = STAGES[-1], progress: bool = True,
+                 remesh: bool = True, options: dict | PipelineOptions | None = None) -> PipelineResult:
+    """Run the stages up to ``until`` on ``surface`` (path or :class:`ShellMesh`) with the member
+    ``layout`` (path, dict or :class:`~shellmesh_mdao.layout.Layout`) at target quad size
+    ``size``. ``options``: :class:`PipelineOptions` or a dict of them (solver options);
+    ``remesh=False`` imprints into the input triangulation as it is (for tests)."""
+    if until not in STAGES:
+        raise ShellMeshError(f"unknown stage {until!r}; --until takes one of: {', '.join(STAGES)}")
+    opts = PipelineOptions.from_dict(options)
+    if not remesh:
+        opts = dataclasses.replace(opts, remesh=False)
+    timer = _Stages(progress)
+    seconds: dict = {}
+    with timer("load", seconds):
+        state = stage_load(surface, size, opts)
+    state.report["inputs"]["until"] = until
+    for name in STAGES[1:STAGES.index(until) + 1]:
+        with timer(name, seconds):
+            state = stage_layout(state, layout) if name == "layout" else _STAGE_FUNCS[name](state)
+    state.report["stages"] = seconds
+    return _finish(PipelineResult(state.mesh, state.report, surface=state.surface, layout=state.layout,
+                                  chains=state.chains, stage=state.stage, state=state))
 
 
 def _finish(result: PipelineResult) -> PipelineResult:

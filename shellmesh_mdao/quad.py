@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import MeshValidationError
 from .mesh import ShellMesh
-from .smooth import CURVE, FIXED, Supports
+from .smooth import CURVE, FIXED, Supports, _min_corner_sj
 
 __all__ = ["subdivide_to_quads", "subdivide_faces"]
 
@@ -56,8 +56,37 @@ def subdivide_faces(faces: np.ndarray, face_edges: np.ndarray, n_points: int, n_
     return children, parent
 
 
+def _guard_folds(P, X_lin, X_proj, children, parent, parent_normal, threshold: float, rounds: int = 8):
+    """Positions of the new nodes: projected (``X_proj``) except where projecting would leave a
+    child quad with a scaled Jacobian at or below ``threshold`` (against its own normal or its
+    parent's) that the unprojected, in-plane position (``X_lin``) does not: those children's new
+    nodes keep the linear position. Happens where a parent face spans a crease or a thin edge
+    tighter than the element size (the closest surface point lies across it)."""
+    n = len(P)
+    is_tri = np.zeros(len(children), bool)
+    nref = parent_normal[parent]
+    lin = np.vstack([P, X_lin])
+    sj_lin = _min_corner_sj(lin, children, is_tri, nref)
+    keep_lin = np.zeros(len(X_lin), bool)
+    X = X_proj.copy()
+    for _ in range(rounds):
+        cur = np.vstack([P, X])
+        sj = _min_corner_sj(cur, children, is_tri, nref)
+        bad = (sj <= threshold) & (sj_lin > sj)
+        if not bad.any():
+            break
+        nodes = children[bad].ravel()
+        nodes = nodes[nodes >= n] - n
+        fresh = nodes[~keep_lin[nodes]]
+        if not len(fresh):
+            break
+        keep_lin[fresh] = True
+        X[fresh] = X_lin[fresh]
+    return X
+
+
 def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 0.0,
-                       project: bool = True) -> tuple[ShellMesh, Supports]:
+                       project: bool = True, guard_jacobian: float = 0.2) -> tuple[ShellMesh, Supports]:
     """Split every quad into 4 quads and every triangle into 3 quads (whole mesh at once).
 
     Parameters
@@ -67,6 +96,9 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
     min_dot : skin nodes are projected only onto input triangles whose normal has a dot
         product above this with the local face normal.
     project : project the new nodes onto their supports (default True).
+    guard_jacobian : a child whose scaled Jacobian the projection would bring to or below this
+        value (and below its unprojected value) keeps its new nodes at their linear position
+        (edge midpoint, face centroid) instead: no subdivision step folds an element.
 
     Returns ``(quad mesh, supports)``. Node ``i < n`` keeps its index and position; edge
     ``e`` of ``mesh.topology()`` gets node ``n + e`` and face ``f`` node ``n + E + f``.
@@ -151,7 +183,8 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
         if (~ok).any():
             bad = np.flatnonzero(~ok)
             x[bad], _ = supports.project_kind(X_new[bad], pk[bad], pr[bad], None)
-        X_new = np.where((pk == FIXED)[:, None], X_new, x)
+        x = np.where((pk == FIXED)[:, None], X_new, x)
+        X_new = _guard_folds(P, X_new, x, children, parent, fn, guard_jacobian)
     sup = supports.extended(new_kind, new_ref)
     # feature edges of the new mesh with their curves
     ec_old = supports.curve_of_edges(fe)

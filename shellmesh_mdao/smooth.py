@@ -1073,3 +1073,76 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                        n_fold_hits=n_fold, n_jump_hits=n_jump, quality_before=before,
                        quality_after=mesh_figures(out, supports, target_edge))
     return out, res
+
+
+# ============================================================================ pipeline supports
+def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
+    """Supports of the conforming skin + members mesh of the pipeline.
+
+    ``skin``: :class:`~shellmesh_mdao.project.SurfaceLocator` of the ORIGINAL input skin;
+    ``infos``: the layout's :class:`~shellmesh_mdao.members.MemberInfo` list. Member faces
+    (components named ``<member>`` or ``<member>/seg_<j>``) of a planar member move in its
+    plane; every other face lies on the input skin. Feature edges of member ``k`` (its chains,
+    its junction and end lines) slide on the exact section of the input skin with the member's
+    plane or on the straight junction lines; geometric feature edges (id -1: trailing edges,
+    tips, creases) slide on their own polylines. Chain and junction vertices may slide
+    (``sliding=True``); crossings, corners and curve ends stay fixed (:func:`derive_supports`).
+    """
+    from .section import Plane, plane_section
+
+    by_name = {m.name: m for m in (infos or [])}
+    planes, owner = {}, {}
+    for i, nm in enumerate(mesh.component_names):
+        base = nm.split("/seg_")[0]
+        inf = by_name.get(base)
+        if inf is None:
+            continue
+        owner[i] = inf
+        if inf.plane_normal is not None:
+            planes[i] = (inf.plane_point, inf.plane_normal)
+    P, T = skin.points, skin.triangles
+    fe, fid = mesh.feature_edges, mesh.feature_edge_ids
+    curves = {}
+    for i in np.unique(fid).tolist():                      # loop over members (and -1)
+        polys = []
+        inf = owner.get(int(i))
+        if inf is not None and inf.plane_normal is not None:
+            sec = plane_section(P, T, Plane.make(inf.plane_point, inf.plane_normal))
+            polys += [(sec.nodes[ix], cl) for ix, cl in polylines_from_edges(sec.nodes, sec.links)]
+        polys += [(mesh.points[ix], cl) for ix, cl in polylines_from_edges(mesh.points, fe[fid == i])]
+        curves[int(i)] = polys
+    return derive_supports(mesh, skin, planes, curves, sliding=True)
+
+
+def edge_midpoint_projector(mesh: ShellMesh, supports: Supports):
+    """``project(points, parent_edges)`` for :func:`~shellmesh_mdao.split.split_polygons`: a new
+    node on edge (a, b) goes onto the curve of a feature edge, else onto the support shared by
+    the edge's faces (input skin or member plane); an edge between faces of different supports
+    (a junction without a curve) keeps the linear midpoint."""
+    topo = mesh.topology()
+    ck, cr = supports.comp_kind, supports.comp_ref
+    fkind = ck[mesh.component].astype(np.int64)
+    fref = cr[mesh.component]
+    code = fkind * (int(max(cr.max(initial=0), 0)) + 1) + fref
+    ne = len(topo.edges)
+    hcode = code[topo.he_face]
+    lo = np.full(ne, np.iinfo(np.int64).max)
+    hi = np.full(ne, np.iinfo(np.int64).min)
+    np.minimum.at(lo, topo.he_edge, hcode)
+    np.maximum.at(hi, topo.he_edge, hcode)
+    eface = topo.edge_faces[topo.edge_faces_ptr[:-1]]
+    ekind = np.where(lo == hi, fkind[eface], FIXED).astype(np.int8)
+    eref = np.where(lo == hi, fref[eface], -1)
+
+    def project(points, parent_edges):
+        pe = np.asarray(parent_edges, np.int64).reshape(-1, 2)
+        eid = topo.edge_ids(pe)
+        kind = np.where(eid >= 0, ekind[np.maximum(eid, 0)], FIXED).astype(np.int8)
+        ref = np.where(eid >= 0, eref[np.maximum(eid, 0)], -1)
+        cv = supports.curve_of_edges(pe)
+        kind = np.where(cv >= 0, CURVE, kind).astype(np.int8)
+        ref = np.where(cv >= 0, cv, ref)
+        x, _ = supports.project_kind(points, kind, ref)
+        return x
+
+    return project
