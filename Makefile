@@ -5,12 +5,16 @@ PYTHON ?= python3
 DEMO_DIR ?= demo_out
 PYTEST_ARGS ?=
 
-.PHONY: install install-test demo test test-fast
+.PHONY: install install-test install-system demo test test-fast
 
-install:
+# System packages: the CalculiX solver (ccx) for the structural analysis.
+install-system:
+	@command -v ccx >/dev/null 2>&1 || (apt-get update -qq && apt-get install -y -qq calculix-ccx >/dev/null)
+
+install: install-system
 	$(PYTHON) -m pip install --quiet -e .
 
-install-test:
+install-test: install-system
 	$(PYTHON) -m pip install --quiet -e ".[test]"
 
 demo: install

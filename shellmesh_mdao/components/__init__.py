@@ -1,6 +1,6 @@
-"""OpenMDAO wrappers of the pipeline stages, one component per file (OpenAeroStruct style).
+"""OpenMDAO wrappers, one component per file (OpenAeroStruct style).
 
-Each component calls the same core function as the CLI stage of the same name
-(:mod:`shellmesh_mdao.pipeline`). The components arrive with the OpenMDAO issue; until
-then this package holds none.
+Each component is a thin wrapper around the same core function as the CLI stage or the
+analysis of the same name: ``MassComp`` (mass_comp.py) and ``CalculixShellAnalysis``
+(calculix_comp.py) wrap :mod:`shellmesh_mdao.analysis` (see docs/analysis.md).
 """

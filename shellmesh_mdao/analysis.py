@@ -1,0 +1,673 @@
+"""Linear static analysis of a :class:`~shellmesh_mdao.mesh.ShellMesh` with CalculiX (``ccx``).
+
+The core is plain functions; the OpenMDAO components
+(:mod:`shellmesh_mdao.components.mass_comp`, :mod:`shellmesh_mdao.components.calculix_comp`)
+are thin wrappers around them.
+
+:func:`write_deck`       complete CalculiX input deck: the mesh as shells (one ELSET and one
+                         ``*SHELL SECTION`` per component family, written by
+                         :func:`~shellmesh_mdao.export.inp_mesh_lines`), material, clamped nodes,
+                         one static step with the load case, ``*NODE PRINT`` U and ``*EL PRINT`` S.
+:func:`run_ccx`          runs ``ccx`` on a deck in its folder; :class:`SolverError` if it is
+                         missing or fails (with the tail of its output).
+:func:`read_dat`         parses the ``.dat`` file: nodal displacements and integration-point stresses.
+:func:`analyse_shell`    all of it in a temporary folder, reduced to the outputs an optimiser
+                         wants: mass, maximum von Mises stress, a KS aggregate of the von Mises
+                         stress per family, tip deflection.
+
+Element choice (see ``docs/analysis.md``): ``element="linear"`` writes quads as ``S4`` and
+triangles as ``S3``; ``element="quadratic"`` adds a straight midside node on every edge and
+writes ``S8R``/``S6``. CalculiX expands every shell into a layer of solid elements
+(S4 -> C3D8I, incompatible modes, accurate in bending; S4R -> C3D8R, too stiff for thin
+shells; S3 -> C3D6, too stiff in bending; S8R -> C3D20R, S6 -> C3D15, both accurate).
+
+Sign convention checked against ccx 2.20: a positive ``*DLOAD ... P`` on a shell pushes along
+the element normal (right-hand rule of its node order), so :func:`write_deck` signs the
+pressure of each face by its normal and the documented load (``pressure`` along ``+up``) does
+not depend on face orientation.
+"""
+from __future__ import annotations
+
+import fnmatch
+import glob
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SolverError
+from .export import export_order, inp_elset_names, inp_mesh_lines, resolve_material, resolve_thickness, \
+    write_text_atomic
+from .mesh import ShellMesh
+
+__all__ = [
+    "ANALYSIS_MATERIAL", "ELEMENT_TYPES", "CCX_INSTALL_HINT", "LOWER_SKIN_PATTERN", "DatResults", "ShellAnalysis",
+    "find_ccx", "n_families", "family_areas", "shell_mass", "family_ids", "clamped_nodes", "layout_up", "resolve_up",
+    "von_mises", "ks_aggregate", "write_deck", "run_ccx", "read_dat", "analyse_shell",
+]
+
+#: Material of the analysis: generic aluminium, SI units (Pa, kg/m^3).  Any key may be
+#: overridden with ``material={...}`` (keys of :func:`~shellmesh_mdao.export.resolve_material`).
+ANALYSIS_MATERIAL = {"name": "ALUMINIUM", "E": 70.0e9, "nu": 0.33, "rho": 2700.0, "ys": None}
+
+#: ``element`` option -> (quad type, triangle type) written to the deck.
+ELEMENT_TYPES = {"linear": ("S4", "S3"), "quadratic": ("S8R", "S6")}
+
+#: The families loaded by the default pressure load case.
+LOWER_SKIN_PATTERN = "*/lower_skin/bay_*"
+
+#: How to get CalculiX; part of every "ccx not found" message.
+CCX_INSTALL_HINT = ("install CalculiX with `apt-get install calculix-ccx` (Debian/Ubuntu; the binary is `ccx`), "
+                    "or `conda install -c conda-forge calculix`, or pass the path of the executable "
+                    "(ccx=... / environment variable SHELLMESH_CCX)")
+
+_NSET_CLAMP = "SM_CLAMPED"
+_ELSET_PPOS = "SM_PRESSURE_POS"
+_ELSET_PNEG = "SM_PRESSURE_NEG"
+
+
+# --------------------------------------------------------------------------- small helpers
+def n_families(mesh: ShellMesh) -> int:
+    """Number of component families: ``len(mesh.component_names)`` (at least the largest id + 1).
+    The ``thickness`` vectors of this module have this length, in ``mesh.component_names`` order."""
+    m = int(mesh.component.max()) + 1 if mesh.n_faces else 0
+    return max(len(mesh.component_names), m)
+
+
+def family_areas(mesh: ShellMesh) -> np.ndarray:
+    """(n_families,) total face area of each component family (0 for a family without faces)."""
+    return np.bincount(mesh.component, weights=mesh.face_areas(), minlength=n_families(mesh)).astype(np.float64)
+
+
+def shell_mass(mesh: ShellMesh, thickness, density: float) -> float:
+    """Mass of the shells: ``density * sum_f area_f * thickness[family(f)]``.
+
+    ``thickness`` is anything :func:`~shellmesh_mdao.export.resolve_thickness` accepts (one value
+    per family in ``mesh.component_names`` order, a dict name -> t, a number)."""
+    t = resolve_thickness(mesh, thickness)
+    return float(density) * float(family_areas(mesh) @ t)
+
+
+def family_ids(mesh: ShellMesh, patterns) -> np.ndarray:
+    """Sorted ids of the families whose name matches any of ``patterns`` (``fnmatch`` patterns
+    such as ``"*/lower_skin/bay_*"``, or exact names; a single string is one pattern)."""
+    if isinstance(patterns, str):
+        patterns = [patterns]
+    names = list(mesh.component_names)
+    return np.array([i for i, n in enumerate(names) if any(fnmatch.fnmatchcase(n, p) for p in patterns)],
+                    dtype=np.int64)
+
+
+def _used_nodes(mesh: ShellMesh) -> np.ndarray:
+    used = np.zeros(mesh.n_points, bool)
+    used[mesh.faces[mesh.faces >= 0]] = True
+    return used
+
+
+def _load_layout(layout):
+    if layout is None:
+        return None
+    from .layout import Layout, load_layout
+
+    return layout if isinstance(layout, Layout) else load_layout(layout)
+
+
+def layout_up(layout) -> np.ndarray:
+    """Unit ``up`` of the first wing of a layout (path, dict or Layout)."""
+    lay = _load_layout(layout)
+    if lay is None or not lay.wings:
+        raise SolverError("the analysis needs the 'up' direction (the load and the tip deflection act along it) "
+                          "and the layout has no wing: give up=[0, 0, 1] (the chord-plane normal)")
+    return lay.wing_up(lay.wings[0])
+
+
+def resolve_up(up=None, layout=None) -> np.ndarray:
+    """Unit load direction: ``up`` if given, else the ``up`` of the layout's first wing."""
+    if up is None:
+        if layout is None:
+            raise SolverError("the analysis needs the 'up' direction (the pressure and the tip deflection act "
+                              "along it): give up=[0, 0, 1] (the chord-plane normal) or the layout")
+        return layout_up(layout)
+    u = np.asarray(up, dtype=np.float64).reshape(-1)
+    if u.shape != (3,) or not np.isfinite(u).all() or np.linalg.norm(u) == 0:
+        raise SolverError(f"up must be a non-zero vector [x, y, z], got {up!r}")
+    return u / np.linalg.norm(u)
+
+
+def clamped_nodes(mesh: ShellMesh, rule="root", *, layout=None, axis=None, tol: float | None = None) -> np.ndarray:
+    """Node indices (0-based, sorted) clamped by the analysis.
+
+    ``rule``:
+
+    * ``"root"`` (default): every node used by a face whose coordinate along the span axis is
+      within ``tol`` of the root end. The span axis is ``axis`` (0, 1, 2 for x, y, z) if given;
+      else, with a ``layout``, the coordinate axis closest to its first wing's span vector
+      (mid-chord root -> tip), the root end being the end that vector points away from; else
+      the longest bounding-box axis, root at its minimum. ``tol`` defaults to 1e-4 times the
+      mesh's bounding-box diagonal. For a wing whose root is a flat end cap (the NACA wings,
+      a box beam) this is the cap and the skin's root section.
+    * ``"root_rib"``: the nodes of every family named ``*/rib_0`` (the root rib of each wing)
+      and of its imprint chains on the skin (feature edges owned by that family).
+    * an array of node indices: used as given (checked for range).
+    """
+    used = _used_nodes(mesh)
+    if not isinstance(rule, str):
+        ids = np.unique(np.asarray(rule, dtype=np.int64).reshape(-1))
+        if not len(ids):
+            raise SolverError("the list of clamped nodes is empty: give at least the nodes of one root section")
+        if ids.min() < 0 or ids.max() >= mesh.n_points:
+            raise SolverError(f"clamped node ids must lie in [0, {mesh.n_points}) (0-based mesh node indices); "
+                              f"got values from {int(ids.min())} to {int(ids.max())}")
+        if not used[ids].all():
+            raise SolverError(f"clamped nodes {ids[~used[ids]][:5].tolist()} are not used by any element: clamp "
+                              "nodes of the mesh's faces")
+        return ids
+    if rule == "root":
+        P = mesh.points
+        sign = 1.0
+        if axis is not None:
+            if axis not in (0, 1, 2):
+                raise SolverError(f"axis must be 0, 1 or 2 (x, y, z), got {axis!r}")
+            ax = int(axis)
+        elif layout is not None and _load_layout(layout).wings:
+            s = _load_layout(layout).wings[0].span_vector()
+            ax = int(np.argmax(np.abs(s)))
+            sign = 1.0 if s[ax] >= 0 else -1.0
+        else:
+            ext = P[used].max(0) - P[used].min(0) if used.any() else np.zeros(3)
+            ax = int(np.argmax(ext))
+        if not used.any():
+            raise SolverError("the mesh has no faces: nothing to clamp or analyse")
+        c = sign * P[:, ax]
+        tol = 1e-4 * mesh.diagonal if tol is None else float(tol)
+        root = c[used].min()
+        return np.flatnonzero(used & (c <= root + tol)).astype(np.int64)
+    if rule == "root_rib":
+        fam = family_ids(mesh, "*/rib_0")
+        if not len(fam):
+            raise SolverError("clamp='root_rib' needs a family named '<wing>/rib_0' (the root rib) in the mesh; "
+                              f"the families are {list(mesh.component_names)}: use clamp='root' or give node ids")
+        sel = np.zeros(mesh.n_points, bool)
+        f = mesh.faces[np.isin(mesh.component, fam)]
+        sel[f[f >= 0]] = True
+        fe = mesh.feature_edges[np.isin(mesh.feature_edge_ids, fam)]
+        sel[fe.reshape(-1)] = True
+        ids = np.flatnonzero(sel & used).astype(np.int64)
+        if not len(ids):
+            raise SolverError("the root rib '*/rib_0' has no nodes in the mesh (no faces, no imprint chain): run "
+                              "the pipeline through the imprint stage or use clamp='root'")
+        return ids
+    raise SolverError(f"unknown clamp rule {rule!r}: use 'root', 'root_rib' or an array of node indices")
+
+
+def von_mises(stress: np.ndarray) -> np.ndarray:
+    """Von Mises stress of (k, 6) stress rows ``(sxx, syy, szz, sxy, sxz, syz)``."""
+    s = np.asarray(stress, dtype=np.float64).reshape(-1, 6)
+    d = (s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2
+    return np.sqrt(0.5 * d + 3.0 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2))
+
+
+def ks_aggregate(values, groups, n_groups: int, rho: float = 50.0, ref=None) -> np.ndarray:
+    """Kreisselmeier-Steinhauser aggregate of ``values`` per group (vectorised).
+
+    ``ks_g = r_g * (m_g + ln(sum_{i in g} exp(rho * (v_i / r_g - m_g))) / rho)`` with
+    ``m_g = max_i v_i / r_g``: a smooth upper bound of the group maximum,
+    ``max_g <= ks_g <= max_g + r_g ln(n_g) / rho``. The reference ``r_g`` is ``ref`` when given
+    (a number, e.g. the yield stress) and otherwise the group's own maximum (scale free).
+    Empty groups, and groups whose values are all zero, give 0."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    g = np.asarray(groups, dtype=np.int64).reshape(-1)
+    mx = np.full(n_groups, -np.inf)
+    np.maximum.at(mx, g, v)
+    if ref is None:
+        r = np.where(np.isfinite(mx) & (mx > 0), mx, 1.0)
+    else:
+        r = np.full(n_groups, float(ref))
+        if not np.isfinite(r).all() or (r <= 0).any():
+            raise SolverError(f"ks_ref must be a positive stress, got {ref!r}")
+    m = np.where(np.isfinite(mx), mx / r, 0.0)
+    e = np.bincount(g, weights=np.exp(rho * (v / r[g] - m[g])), minlength=n_groups)
+    ks = r * (m + np.log(np.where(e > 0, e, 1.0)) / rho)
+    return np.where(np.isfinite(mx) & (mx > 0), ks, 0.0)
+
+
+def _rows(fmt: str, columns, chunk: int = 100_000):
+    """Text of rows formatted with ``fmt`` (printf) from equal-length columns, formatted in C
+    one chunk at a time."""
+    n = len(columns[0]) if len(columns) else 0
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        block = np.column_stack([np.asarray(c[s:e]) for c in columns]).astype(object)
+        yield (fmt * (e - s)) % tuple(block.ravel().tolist())
+
+
+def _id_lines(ids) -> str:
+    """Ids (1-based ints) 8 per line, each line ending with a comma (CalculiX set data)."""
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+    full = len(ids) // 8 * 8
+    out = "".join(_rows("%d, %d, %d, %d, %d, %d, %d, %d,\n", [ids[j:full:8] for j in range(8)])) if full else ""
+    if full < len(ids):
+        out += ", ".join(str(int(i)) for i in ids[full:]) + ",\n"
+    return out
+
+
+# --------------------------------------------------------------------------- ccx executable
+def find_ccx(executable=None) -> str:
+    """Path of the CalculiX solver: ``executable`` (a name on PATH or a path) if given, else
+    the environment variable ``SHELLMESH_CCX``, else ``ccx`` on PATH, else the highest
+    versioned ``ccx_<version>`` on PATH (some packages install ``ccx_2.20``). Raises
+    :class:`SolverError` with the install command when none is found."""
+    cand = executable if executable is not None else os.environ.get("SHELLMESH_CCX")
+    if cand:
+        p = shutil.which(str(cand))
+        if p is None:
+            raise SolverError(f"CalculiX executable {str(cand)!r} not found or not executable; {CCX_INSTALL_HINT}")
+        return p
+    p = shutil.which("ccx")
+    if p:
+        return p
+    found = []
+    for d in os.environ.get("PATH", "").split(os.pathsep):
+        for f in glob.glob(os.path.join(d, "ccx_*")):
+            m = re.fullmatch(r"ccx_(\d+(?:\.\d+)*)", os.path.basename(f))
+            if m and os.access(f, os.X_OK) and os.path.isfile(f):
+                found.append((tuple(int(x) for x in m[1].split(".")), f))
+    if found:
+        return sorted(found)[-1][1]
+    raise SolverError(f"the CalculiX solver 'ccx' is not installed (not on PATH); {CCX_INSTALL_HINT}")
+
+
+# --------------------------------------------------------------------------- deck
+def _model_blocks(mesh: ShellMesh, t: np.ndarray, mat: dict, element: str) -> tuple[list, int]:
+    """Model part of the deck (nodes, elements, material, sections) and the number of nodes."""
+    qt, tt = ELEMENT_TYPES[element]
+    if element == "linear":
+        return inp_mesh_lines(mesh, t, mat, quad_type=qt, tri_type=tt), mesh.n_points
+    # quadratic: straight midside node of edge e = node n + e, written after the corner nodes
+    topo = mesh.topology()
+    n = mesh.n_points
+    mid = 0.5 * (mesh.points[topo.edges[:, 0]] + mesh.points[topo.edges[:, 1]])
+    big = ShellMesh(np.vstack([mesh.points, mid]), mesh.faces, mesh.component, list(mesh.component_names))
+    blocks = inp_mesh_lines(big, t, mat, quad_type=qt, tri_type=tt)
+    # replace the element rows written by inp_mesh_lines (4/3 nodes) by 8/6-node rows, same numbering
+    out, skipping, inserted = [], False, False
+    for b in blocks:
+        if b.startswith("*ELEMENT"):
+            skipping = True
+            if not inserted:
+                out.extend(_quadratic_elements(mesh, topo.face_edges + n))
+                inserted = True
+            continue
+        if skipping and not b.startswith("*"):
+            continue
+        skipping = False
+        out.append(b)
+    return out, big.n_points
+
+
+def _quadratic_elements(mesh: ShellMesh, mids: np.ndarray) -> list:
+    order = export_order(mesh)
+    faces, mids, comp = mesh.faces[order] + 1, mids[order] + 1, mesh.component[order]
+    elsets = inp_elset_names(mesh)
+    k = len(elsets)
+    starts = np.searchsorted(comp, np.arange(k + 1))
+    eids = np.arange(1, len(faces) + 1)
+    out = []
+    for c in range(k):                      # loop over families (a handful), not elements
+        s, e = starts[c], starts[c + 1]
+        nq = int((faces[s:e, 3] > 0).sum())
+        if nq:
+            out.append(f"*ELEMENT, TYPE=S8R, ELSET={elsets[c]}\n")
+            cols = [eids[s:s + nq]] + [faces[s:s + nq, j] for j in range(4)] + [mids[s:s + nq, j] for j in range(4)]
+            out.extend(_rows("%d, %d, %d, %d, %d, %d, %d, %d, %d\n", cols))
+        if nq < e - s:
+            out.append(f"*ELEMENT, TYPE=S6, ELSET={elsets[c]}\n")
+            cols = [eids[s + nq:e]] + [faces[s + nq:e, j] for j in range(3)] + [mids[s + nq:e, j] for j in range(3)]
+            out.extend(_rows("%d, %d, %d, %d, %d, %d, %d\n", cols))
+    return out
+
+
+def _nodal_forces(mesh: ShellMesh, nodal_forces):
+    if nodal_forces is None:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    try:
+        ids, f = nodal_forces
+    except (TypeError, ValueError):
+        raise SolverError("nodal_forces must be a pair (node_ids (k,), forces (k, 3)) with 0-based mesh node "
+                          "indices and force vectors") from None
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+    f = np.asarray(f, dtype=np.float64)
+    if f.ndim == 1 and f.shape == (3,):
+        f = np.broadcast_to(f, (len(ids), 3))
+    if f.shape != (len(ids), 3):
+        raise SolverError(f"nodal_forces: {len(ids)} node ids but forces of shape {f.shape}; give one (3,) "
+                          "force vector per node")
+    if len(ids) and (ids.min() < 0 or ids.max() >= mesh.n_points):
+        raise SolverError(f"nodal_forces node ids must lie in [0, {mesh.n_points}) (0-based)")
+    if not np.isfinite(f).all():
+        raise SolverError("nodal_forces contain NaN/inf: give finite forces")
+    if len(ids) and not _used_nodes(mesh)[ids].all():
+        raise SolverError("nodal_forces act on nodes used by no element: load nodes of the mesh's faces")
+    uid, inv = np.unique(ids, return_inverse=True)      # a node listed twice gets the sum of its forces
+    tot = np.zeros((len(uid), 3))
+    np.add.at(tot, inv.reshape(-1), f)
+    return uid, tot
+
+
+def write_deck(mesh: ShellMesh, path, *, thickness=None, material: dict | None = None, clamped,
+               up=None, pressure: float = 0.0, pressure_families=LOWER_SKIN_PATTERN, nodal_forces=None,
+               element: str = "linear", clamp_rotations: bool = True) -> dict:
+    """Write a complete CalculiX input deck for a linear static analysis of ``mesh``.
+
+    Parameters
+    ----------
+    thickness : one value per family (``mesh.component_names`` order), a dict name -> t, or a
+        number (see :func:`~shellmesh_mdao.export.resolve_thickness`).
+    material : overrides of :data:`ANALYSIS_MATERIAL` (keys ``E``, ``nu``, ``rho``, ``name``, ...).
+    clamped : 0-based node indices with all translations (and, with ``clamp_rotations``, all
+        rotations) fixed, or a rule of :func:`clamped_nodes` (applied without a layout).
+    up : load direction; needed only when ``pressure`` is non-zero.
+    pressure : uniform pressure (force per area) on the faces of ``pressure_families``
+        (fnmatch patterns, default ``*/lower_skin/bay_*``), acting along ``+up`` whatever the
+        face orientation (negative: along ``-up``).
+    nodal_forces : ``(node_ids (k,), forces (k, 3))`` concentrated forces (0-based node indices;
+        a (3,) force is applied to every listed node; repeated nodes get the sum).
+    element : ``"linear"`` (S4 quads / S3 triangles) or ``"quadratic"`` (S8R / S6 with a
+        straight midside node per edge).
+
+    Element ``k`` of the deck (1-based id ``k + 1``) is face ``export_order(mesh)[k]``; node
+    ``i`` has id ``i + 1``. The step prints ``U`` of every node and ``S`` (integration-point
+    stresses) of every element to the ``.dat`` file. Returns a dict with ``element_of_face``
+    (1-based element id of every face), ``n_pressure_faces``, ``load`` (total applied force
+    vector) and ``n_nodes`` written. Atomic write (:func:`~shellmesh_mdao.export.write_text_atomic`).
+    """
+    if not isinstance(mesh, ShellMesh):
+        raise SolverError(f"the analysis needs a ShellMesh, got {type(mesh).__name__}")
+    if element not in ELEMENT_TYPES:
+        raise SolverError(f"unknown element {element!r}: use one of {sorted(ELEMENT_TYPES)}")
+    if not mesh.n_faces:
+        raise SolverError("the mesh has no faces: nothing to analyse")
+    if not np.isfinite(mesh.points).all():
+        raise SolverError("the mesh has NaN/inf node coordinates: fix the mesh first (ShellMesh.check lists them)")
+    t = resolve_thickness(mesh, thickness)
+    mat = resolve_material({**ANALYSIS_MATERIAL, **(material or {})})
+    clamped = clamped_nodes(mesh, clamped)
+    blocks, n_written = _model_blocks(mesh, t, mat, element)
+    order = export_order(mesh)
+    eid = np.empty(mesh.n_faces, np.int64)
+    eid[order] = np.arange(1, mesh.n_faces + 1)
+    taken = {s.upper() for s in inp_elset_names(mesh)}
+    clash = taken & {_NSET_CLAMP, _ELSET_PPOS, _ELSET_PNEG}
+    if clash:
+        raise SolverError(f"component name(s) {sorted(clash)} are reserved by the analysis deck: rename them")
+    load = np.zeros(3)
+    fix = clamped + 1
+    if element == "quadratic":               # midside nodes of edges between two clamped nodes
+        is_c = np.zeros(mesh.n_points, bool)
+        is_c[clamped] = True
+        e = mesh.topology().edges
+        fix = np.concatenate([fix, mesh.n_points + 1 + np.flatnonzero(is_c[e].all(1))])
+    tail = [f"*NSET, NSET={_NSET_CLAMP}\n", _id_lines(fix),
+            f"*BOUNDARY\n{_NSET_CLAMP}, 1, {6 if clamp_rotations else 3}\n",
+            "*STEP\n*STATIC\n"]
+    n_p = 0
+    pressure = float(pressure)
+    if not np.isfinite(pressure):
+        raise SolverError(f"pressure must be finite, got {pressure!r}")
+    if pressure != 0.0:
+        u = resolve_up(up, None)
+        fam = family_ids(mesh, pressure_families)
+        faces = np.flatnonzero(np.isin(mesh.component, fam))
+        if not len(faces):
+            raise SolverError(f"no faces to carry the pressure: no family matches {pressure_families!r} (the "
+                              f"families are {list(mesh.component_names)[:12]}...); run the pipeline with a layout "
+                              "that has ribs, give pressure_families, or load the model with nodal_forces")
+        av = mesh.face_area_vectors()[faces]
+        sgn = av @ u
+        pos, neg = faces[sgn >= 0], faces[sgn < 0]
+        load += pressure * np.abs(sgn).sum() * u        # force along +up of each face: p * A * |n.up|
+        n_p = len(faces)
+        # a positive P on a ccx shell pushes along the element normal: P = +p where n.up >= 0
+        for name, sel, val in ((_ELSET_PPOS, pos, pressure), (_ELSET_PNEG, neg, -pressure)):
+            if len(sel):
+                tail.insert(0, f"*ELSET, ELSET={name}\n" + _id_lines(np.sort(eid[sel])))
+                tail.append(f"*DLOAD\n{name}, P, {val!r}\n")
+    ids, f = _nodal_forces(mesh, nodal_forces)
+    if len(ids):
+        load += f.sum(0)
+        nz = np.nonzero(f)
+        if len(nz[0]):
+            tail.append("*CLOAD\n")
+            tail.extend(_rows("%d, %d, %r\n", [ids[nz[0]] + 1, nz[1] + 1, f[nz]]))
+    tail.append("*NODE PRINT, NSET=NALL\nU\n*EL PRINT, ELSET=EALL\nS\n*END STEP\n")
+    write_text_atomic(path, "".join(blocks) + "".join(tail))
+    return {"element_of_face": eid, "n_pressure_faces": n_p, "load": load, "n_nodes": n_written}
+
+
+# --------------------------------------------------------------------------- run
+def _tail(text: str, n: int = 25) -> str:
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    return "\n".join(lines[-n:])
+
+
+def run_ccx(deck, *, executable=None, threads: int = 1, timeout: float | None = None) -> Path:
+    """Run CalculiX on ``deck`` (a ``.inp`` file) in the deck's folder and return the path of
+    its ``.dat`` result file. ``threads`` sets OMP_NUM_THREADS / CCX_NPROC_* (default 1: the
+    machines are shared). The solver's console output is kept next to the deck as
+    ``<job>.log``. Raises :class:`SolverError` when ccx is missing, times out, exits with an
+    error, prints ``*ERROR`` or writes no results; the message ends with the tail of its output."""
+    exe = find_ccx(executable)
+    deck = Path(deck)
+    if deck.suffix != ".inp" or not deck.is_file():
+        raise SolverError(f"{deck} is not a CalculiX input deck (.inp file): write one with write_deck first")
+    job = deck.stem
+    nt = str(max(1, int(threads)))
+    env = dict(os.environ, OMP_NUM_THREADS=nt, CCX_NPROC_EQUATION_SOLVER=nt, CCX_NPROC_STIFFNESS=nt,
+               CCX_NPROC_RESULTS=nt)
+    dat = deck.with_suffix(".dat")
+    dat.unlink(missing_ok=True)
+    try:
+        proc = subprocess.run([exe, "-i", job], cwd=deck.parent, capture_output=True, text=True, env=env,
+                              timeout=timeout, stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired as e:
+        out = (e.stdout or b"").decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
+        raise SolverError(f"ccx did not finish within {timeout} s on {deck.name}: raise the timeout or use a "
+                          f"coarser mesh. Last output:\n{_tail(out)}") from None
+    except OSError as e:
+        raise SolverError(f"cannot run CalculiX {exe!r}: {e.strerror or e}; {CCX_INSTALL_HINT}") from None
+    out = (proc.stdout or "") + (proc.stderr or "")
+    try:
+        deck.with_suffix(".log").write_text(out, encoding="utf-8")
+    except OSError:
+        pass
+    if proc.returncode != 0 or "*ERROR" in out or not dat.is_file() or "Job finished" not in out:
+        why = f"exit code {proc.returncode}" if proc.returncode != 0 else \
+            ("it reported an error" if "*ERROR" in out else "it wrote no results")
+        raise SolverError(f"CalculiX failed on {deck} ({why}); check the mesh (ShellMesh.check), the clamped "
+                          f"nodes and the loads. Last lines of its output:\n{_tail(out)}")
+    return dat
+
+
+# --------------------------------------------------------------------------- parse
+@dataclass
+class DatResults:
+    """Results of the last output time in a CalculiX ``.dat`` file.
+
+    ``node_ids`` (p,) 1-based ids with ``displacement`` (p, 3); ``element_ids`` (r,) 1-based
+    element id and ``integration_point`` (r,) of each stress row ``stress`` (r, 6)
+    ``(sxx, syy, szz, sxy, sxz, syz)`` (global axes)."""
+
+    node_ids: np.ndarray
+    displacement: np.ndarray
+    element_ids: np.ndarray
+    integration_point: np.ndarray
+    stress: np.ndarray
+
+
+_DAT_HEADER = re.compile(r"^ *(displacements|stresses) \(([^)]*)\) for set (\S+) and time +(\S+) *$", re.M)
+
+
+def _numbers(block: str, ncol: int, where: str) -> np.ndarray:
+    """(rows, ncol) float array of the first ``ncol`` numbers of each non-empty line (all lines
+    have the same number of fields in a ccx table; converted by numpy in one go)."""
+    first = block.lstrip().split("\n", 1)[0]
+    if not first.strip():
+        return np.zeros((0, ncol))
+    ntok = len(first.split())
+    toks = block.split()
+    if ntok >= ncol and len(toks) % ntok == 0:
+        arr = np.array(toks).reshape(-1, ntok)[:, :ncol]
+    else:
+        arr = np.array([ln.split()[:ncol] for ln in block.splitlines() if ln.strip()])
+    try:
+        return arr.astype(np.float64)
+    except ValueError:
+        # Fortran drops the 'E' of three-digit exponents: 1.234567-100
+        fixed = np.char.replace(np.char.replace(arr, "-", "E-"), "+", "E+")
+        fixed = np.char.replace(fixed, "EE", "E")
+        fixed = np.where(np.char.startswith(fixed, "E-"), np.char.replace(fixed, "E-", "-", count=1), fixed)
+        try:
+            return fixed.astype(np.float64)
+        except ValueError:
+            raise SolverError(f"cannot read the {where} table of the CalculiX .dat file (unexpected number "
+                              "format); please report this with the .dat file") from None
+
+
+def read_dat(path) -> DatResults:
+    """Parse the ``displacements`` (``*NODE PRINT ... U``) and ``stresses`` (``*EL PRINT ... S``)
+    tables of a CalculiX ``.dat`` file (the last time written). Raises :class:`SolverError` when
+    a table is missing."""
+    text = Path(path).read_text(encoding="utf-8", errors="replace")
+    heads = list(_DAT_HEADER.finditer(text))
+    last: dict = {}
+    for i, h in enumerate(heads):
+        end = heads[i + 1].start() if i + 1 < len(heads) else len(text)
+        kind = h.group(1)
+        if kind in last and last[kind][0] != h.group(4):
+            last[kind] = (h.group(4), [])
+        last.setdefault(kind, (h.group(4), []))[1].append(text[h.end():end])
+    if "displacements" not in last or "stresses" not in last:
+        raise SolverError(f"{path}: no displacement or stress table in the CalculiX results; the deck needs "
+                          "*NODE PRINT (U) and *EL PRINT (S) requests (write it with write_deck)")
+    u = _numbers("\n".join(last["displacements"][1]), 4, "displacement")
+    s = _numbers("\n".join(last["stresses"][1]), 8, "stress")
+    return DatResults(u[:, 0].astype(np.int64), u[:, 1:4], s[:, 0].astype(np.int64), s[:, 1].astype(np.int64),
+                      s[:, 2:8])
+
+
+# --------------------------------------------------------------------------- all in one
+@dataclass
+class ShellAnalysis:
+    """Outputs of :func:`analyse_shell`.
+
+    ``displacement``    (n, 3) displacement of every mesh node (0 for unused nodes).
+    ``von_mises``       (m,) largest integration-point von Mises stress of every face.
+    ``mass``            density * sum(area * thickness).
+    ``max_von_mises``   largest von Mises stress of the model.
+    ``ks_von_mises``    (n_families,) KS aggregate of ``von_mises`` per family (0 if no faces).
+    ``tip_deflection``  displacement along ``up`` of the tip node (the node of largest
+                        ``|u . up|`` among ``tip_nodes``, or among all nodes), signed.
+    ``up``, ``clamped`` (node indices), ``load`` (total applied force), ``seconds`` (ccx run),
+    ``workdir`` (the kept folder, or None).
+    """
+
+    displacement: np.ndarray
+    von_mises: np.ndarray
+    mass: float
+    max_von_mises: float
+    ks_von_mises: np.ndarray
+    tip_deflection: float
+    up: np.ndarray
+    clamped: np.ndarray
+    load: np.ndarray
+    seconds: float
+    element: str
+    workdir: Path | None = None
+    info: dict = field(default_factory=dict)
+
+
+def analyse_shell(mesh: ShellMesh, thickness=None, *, material: dict | None = None, clamp="root", layout=None,
+                  axis=None, clamp_tol: float | None = None, clamp_rotations: bool = True, up=None,
+                  pressure: float = 0.0, pressure_families=LOWER_SKIN_PATTERN, nodal_forces=None,
+                  tip_nodes=None, element: str = "linear", ks_rho: float = 50.0, ks_ref=None,
+                  executable=None, threads: int = 1, timeout: float | None = None, workdir=None) -> ShellAnalysis:
+    """Linear static CalculiX analysis of ``mesh``: write the deck, run ccx, parse, reduce.
+
+    ``clamp`` is a rule or node ids (:func:`clamped_nodes`, with ``layout``, ``axis`` and
+    ``clamp_tol``); ``up`` defaults to the layout's first wing's ``up``; the load case is
+    ``pressure`` on ``pressure_families`` (along ``+up``) plus ``nodal_forces`` (see
+    :func:`write_deck`); at least one must be non-zero. ``tip_nodes`` (0-based) restricts the
+    tip deflection to those nodes. ``ks_rho``/``ks_ref`` parametrise :func:`ks_aggregate`.
+    ``workdir``: a folder (created if missing) where the deck and results are kept; by default
+    a temporary folder that is removed. Raises :class:`SolverError` (ccx missing or failed,
+    bad options) or :class:`~shellmesh_mdao.errors.OutputError` (bad thickness/material).
+    """
+    if not isinstance(mesh, ShellMesh):
+        raise SolverError(f"the analysis needs a ShellMesh, got {type(mesh).__name__}")
+    lay = _load_layout(layout)
+    ids = clamped_nodes(mesh, clamp, layout=lay, axis=axis, tol=clamp_tol)
+    u = resolve_up(up, lay)                      # the load and the tip deflection act along up
+    fids, fvec = _nodal_forces(mesh, nodal_forces)
+    if float(pressure) == 0.0 and (not len(fids) or not np.any(fvec)):
+        raise SolverError("no load: give a non-zero pressure (on the lower-skin bays) or nodal_forces")
+    mat = resolve_material({**ANALYSIS_MATERIAL, **(material or {})})
+    t = resolve_thickness(mesh, thickness)
+    find_ccx(executable)                       # fail before writing anything
+    if tip_nodes is not None:
+        tip = np.unique(np.asarray(tip_nodes, dtype=np.int64).reshape(-1))
+        if not len(tip) or tip.min() < 0 or tip.max() >= mesh.n_points:
+            raise SolverError(f"tip_nodes must be a non-empty list of node indices in [0, {mesh.n_points})")
+    else:
+        tip = np.flatnonzero(_used_nodes(mesh))
+    keep = workdir is not None
+    tmp = None
+    if keep:
+        folder = Path(workdir)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise SolverError(f"cannot create the analysis folder {folder}: {e.strerror or e}; choose a writable "
+                              "folder") from None
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix="shellmesh_ccx_")
+        folder = Path(tmp.name)
+    try:
+        deck = folder / "shell.inp"
+        info = write_deck(mesh, deck, thickness=t, material=mat, clamped=ids, up=u, pressure=pressure,
+                          pressure_families=pressure_families, nodal_forces=(fids, fvec), element=element,
+                          clamp_rotations=clamp_rotations)
+        t0 = time.perf_counter()
+        dat = run_ccx(deck, executable=executable, threads=threads, timeout=timeout)
+        seconds = time.perf_counter() - t0
+        res = read_dat(dat)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    disp = np.zeros((mesh.n_points, 3))
+    sel = (res.node_ids >= 1) & (res.node_ids <= mesh.n_points)
+    disp[res.node_ids[sel] - 1] = res.displacement[sel]
+    if not np.isfinite(disp).all() or not np.isfinite(res.stress).all():
+        raise SolverError("CalculiX returned NaN/inf results: the model is probably not held (check the clamped "
+                          "nodes) or has disconnected parts (ShellMesh.n_bodies)")
+    order = export_order(mesh)
+    if len(res.element_ids) and (res.element_ids.min() < 1 or res.element_ids.max() > mesh.n_faces):
+        raise SolverError("the CalculiX stress table names elements that are not in the deck; please report this")
+    vm_ip = von_mises(res.stress)
+    vm = np.zeros(mesh.n_faces)
+    np.maximum.at(vm, order[res.element_ids - 1], vm_ip)
+    nf = n_families(mesh)
+    ks = ks_aggregate(vm, mesh.component, nf, rho=ks_rho, ref=ks_ref)
+    d = disp[tip] @ u
+    k = int(np.argmax(np.abs(d)))
+    info.pop("element_of_face", None)
+    return ShellAnalysis(
+        displacement=disp, von_mises=vm, mass=float(mat["rho"]) * float(family_areas(mesh) @ t),
+        max_von_mises=float(vm.max()) if len(vm) else 0.0, ks_von_mises=ks, tip_deflection=float(d[k]), up=u,
+        clamped=ids, load=info["load"], seconds=seconds, element=element, workdir=folder if keep else None,
+        info=info)

@@ -1,0 +1,121 @@
+"""OpenMDAO component: linear static CalculiX analysis of the shell mesh.
+
+A thin wrapper of :func:`shellmesh_mdao.analysis.analyse_shell`: every ``compute`` writes the
+deck with the current per-family thicknesses, runs ``ccx`` in a temporary folder and parses
+the ``.dat`` results. Partials are finite differences (``declare_partials(method='fd')``),
+declared only for the families that have faces, so one evaluation of the partials costs
+one ccx run per non-empty family. See ``docs/analysis.md``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import openmdao.api as om
+
+from ..analysis import ANALYSIS_MATERIAL, ELEMENT_TYPES, LOWER_SKIN_PATTERN, analyse_shell, clamped_nodes, \
+    find_ccx, n_families, resolve_up
+from ..export import DEFAULT_THICKNESS, resolve_material
+from ..mesh import ShellMesh
+
+__all__ = ["CalculixShellAnalysis"]
+
+
+class CalculixShellAnalysis(om.ExplicitComponent):
+    """CalculiX shell analysis: mass, stresses and tip deflection from per-family thicknesses.
+
+    Input ``thickness`` (n_families,) in ``mesh.component_names`` order. Outputs ``mass``,
+    ``max_von_mises``, ``ks_von_mises`` (n_families,: KS aggregate of the element von Mises
+    stresses of each family, 0 for families without faces) and ``tip_deflection``
+    (displacement along ``up`` of the node of largest ``|u.up|`` among ``tip_nodes``, or among
+    all nodes). The last full result (:class:`~shellmesh_mdao.analysis.ShellAnalysis`:
+    displacement field, per-element von Mises stress, ...) of the latest ``compute`` is kept in
+    ``self.last_result``. Results of the last few thickness vectors are cached, so a ``compute``
+    at a point already analysed (the FD base point, a repeated run_model, a change of the
+    thickness of a family without faces) does not run ccx again.
+
+    Options: ``mesh`` (required), ``layout`` (gives ``up`` and the span axis), ``material``
+    (overrides of aluminium E=70e9, nu=0.33, rho=2700), ``clamp`` ("root", "root_rib" or node
+    ids), ``clamp_tol``, ``axis``, ``clamp_rotations``, ``up``, ``pressure`` (default 1e4,
+    along +up on ``pressure_families``), ``pressure_families``, ``nodal_forces``
+    ``(ids, forces)``, ``tip_nodes``, ``element`` ("linear": S4/S3, "quadratic": S8R/S6),
+    ``ks_rho``, ``ks_ref``, ``thickness`` (initial value), ``ccx`` (executable), ``threads``,
+    ``timeout`` (s), ``workdir`` (keep the files there), ``fd_step`` (relative FD step).
+    """
+
+    def initialize(self):
+        o = self.options
+        o.declare("mesh", types=ShellMesh, desc="the shell mesh (component families = thickness groups)")
+        o.declare("layout", default=None, desc="layout (dict, path or Layout): up direction and span axis")
+        o.declare("material", default=None, types=(dict, type(None)), desc="overrides of ANALYSIS_MATERIAL")
+        o.declare("clamp", default="root", desc="'root', 'root_rib' or 0-based node ids to clamp")
+        o.declare("clamp_tol", default=None, desc="distance tolerance of the 'root' rule (default 1e-4 diagonal)")
+        o.declare("axis", default=None, values=(None, 0, 1, 2), desc="span axis of the 'root' rule")
+        o.declare("clamp_rotations", default=True, types=bool, desc="fix rotations of clamped nodes too")
+        o.declare("up", default=None, desc="load / deflection direction (default: the layout's up)")
+        o.declare("pressure", default=1.0e4, types=(int, float), desc="pressure along +up on pressure_families")
+        o.declare("pressure_families", default=LOWER_SKIN_PATTERN, desc="fnmatch pattern(s) of loaded families")
+        o.declare("nodal_forces", default=None, desc="(node ids (k,), forces (k, 3)) concentrated forces")
+        o.declare("tip_nodes", default=None, desc="0-based node ids where the tip deflection is measured")
+        o.declare("element", default="linear", values=tuple(ELEMENT_TYPES), desc="shell element order")
+        o.declare("ks_rho", default=50.0, types=(int, float), desc="KS aggregation parameter")
+        o.declare("ks_ref", default=None, desc="KS reference stress (default: each family's maximum)")
+        o.declare("thickness", default=DEFAULT_THICKNESS, desc="initial thickness of every family")
+        o.declare("ccx", default=None, desc="CalculiX executable (default: ccx on PATH)")
+        o.declare("threads", default=1, types=int, desc="threads given to ccx")
+        o.declare("timeout", default=None, desc="seconds before a ccx run is abandoned")
+        o.declare("workdir", default=None, desc="keep deck and results in this folder (default: temporary)")
+        o.declare("fd_step", default=1e-3, types=float, desc="finite-difference step relative to each thickness")
+
+    def setup(self):
+        o = self.options
+        mesh = o["mesh"]
+        find_ccx(o["ccx"])                                   # SolverError with the install line if missing
+        layout = o["layout"]
+        if layout is not None and not hasattr(layout, "wings"):
+            from ..layout import load_layout
+
+            layout = load_layout(layout)
+        self._up = resolve_up(o["up"], layout)
+        self._clamped = clamped_nodes(mesh, o["clamp"], layout=layout, axis=o["axis"], tol=o["clamp_tol"])
+        resolve_material({**ANALYSIS_MATERIAL, **(o["material"] or {})})      # validate now, not at run time
+        n = n_families(mesh)
+        self.family_names = list(mesh.component_names) + [
+            f"component_{i}" for i in range(len(mesh.component_names), n)]
+        self.last_result = None
+        self.add_input("thickness", val=np.full(n, float(o["thickness"])), shape=(n,),
+                       desc="shell thickness of each family, in mesh.component_names order")
+        self.add_output("mass", val=0.0, desc="mass of all shells (material rho)")
+        self.add_output("max_von_mises", val=0.0, desc="largest integration-point von Mises stress")
+        self.add_output("ks_von_mises", val=np.zeros(n), shape=(n,), desc="KS von Mises stress per family")
+        self.add_output("tip_deflection", val=0.0, desc="tip displacement along up")
+        nz = np.flatnonzero(np.bincount(mesh.component, minlength=n) > 0)
+        self._cache, self._cache_size, self._nonempty = {}, len(nz) + 2, nz   # results of recent thicknesses
+        fd = dict(method="fd", step=o["fd_step"], step_calc="rel_element", form="forward")
+        for name in ("mass", "max_von_mises", "tip_deflection"):
+            self.declare_partials(name, "thickness", rows=np.zeros(len(nz), np.int64), cols=nz, **fd)
+        self.declare_partials("ks_von_mises", "thickness", rows=np.repeat(nz, len(nz)), cols=np.tile(nz, len(nz)),
+                              **fd)
+
+    def compute(self, inputs, outputs):
+        t = np.array(inputs["thickness"], dtype=np.float64)
+        key = t[self._nonempty].tobytes()          # families without faces do not change the model
+        r = self._cache.pop(key, None)
+        if r is None:
+            r = self._run(t)
+        self._cache[key] = r                      # most recent last
+        while len(self._cache) > self._cache_size:
+            self._cache.pop(next(iter(self._cache)))
+        self.last_result = r
+        outputs["mass"] = r.mass
+        outputs["max_von_mises"] = r.max_von_mises
+        outputs["ks_von_mises"] = r.ks_von_mises
+        outputs["tip_deflection"] = r.tip_deflection
+
+    def _run(self, t):
+        o = self.options
+        r = analyse_shell(
+            o["mesh"], t, material=o["material"], clamp=self._clamped, up=self._up,
+            clamp_rotations=o["clamp_rotations"], pressure=float(o["pressure"]),
+            pressure_families=o["pressure_families"], nodal_forces=o["nodal_forces"], tip_nodes=o["tip_nodes"],
+            element=o["element"], ks_rho=float(o["ks_rho"]), ks_ref=o["ks_ref"], executable=o["ccx"],
+            threads=o["threads"], timeout=o["timeout"], workdir=o["workdir"])
+        return r

@@ -1,0 +1,198 @@
+"""OpenMDAO components MassComp and CalculixShellAnalysis on a small NACA wing meshed by the
+pipeline, and the finite-difference partials of the analysis on a small box."""
+import numpy as np
+import openmdao.api as om
+import pytest
+from openmdao.utils.assert_utils import assert_check_partials
+
+from shellmesh_mdao.analysis import ANALYSIS_MATERIAL, find_ccx
+from shellmesh_mdao.components import calculix_comp
+from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis
+from shellmesh_mdao.components.mass_comp import MassComp
+from shellmesh_mdao.errors import SolverError
+from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
+from shellmesh_mdao.mesh import ShellMesh
+
+
+def _have_ccx() -> bool:
+    try:
+        find_ccx()
+        return True
+    except SolverError:
+        return False
+
+
+needs_ccx = pytest.mark.skipif(not _have_ccx(), reason="CalculiX 'ccx' is not installed (apt-get install "
+                                                       "calculix-ccx); CI has it")
+
+SPAN = 6.0
+
+
+@pytest.fixture(scope="module")
+def wing():
+    """Default NACA wing (6 m semi-span), 3 ribs, 2 spars, meshed by the pipeline at 0.2 m."""
+    from shellmesh_mdao.pipeline import run_pipeline
+
+    layout = naca_wing_layout(span=SPAN, ribs=3)
+    res = run_pipeline(naca_wing(span=SPAN, n_chord=24, n_span=16), layout, 0.2, progress=False)
+    return res.mesh, layout
+
+
+def _face_thickness_mass(mesh: ShellMesh, t, rho):
+    return rho * float((mesh.face_areas() * np.asarray(t)[mesh.component]).sum())
+
+
+def test_mass_comp_value_and_partials(wing):
+    mesh, _ = wing
+    n = len(mesh.component_names)
+    p = om.Problem()
+    p.model.add_subsystem("m", MassComp(mesh=mesh), promotes=["*"])
+    p.setup(force_alloc_complex=True)
+    t = np.linspace(0.001, 0.004, n)
+    p.set_val("thickness", t)
+    p.set_val("density", 2810.0)
+    p.run_model()
+    assert p.get_val("mass")[0] == pytest.approx(_face_thickness_mass(mesh, t, 2810.0), rel=1e-12)
+    assert p.model.m.family_names == list(mesh.component_names)
+    data = p.check_partials(out_stream=None, method="cs")
+    assert_check_partials(data, atol=1e-8, rtol=1e-10)
+    data = p.check_partials(out_stream=None, method="fd")
+    assert_check_partials(data, atol=1e-4, rtol=1e-5)
+
+
+@needs_ccx
+def test_calculix_comp_on_pipeline_wing(wing, tmp_path):
+    mesh, layout = wing
+    n = len(mesh.component_names)
+    p = om.Problem()
+    p.model.add_subsystem("fea", CalculixShellAnalysis(mesh=mesh, layout=layout, pressure=1.0e4,
+                                                       workdir=str(tmp_path / "run")), promotes=["*"])
+    p.model.add_subsystem("mass", MassComp(mesh=mesh), promotes_inputs=["thickness"])
+    p.setup()
+    t = np.full(n, 0.003)
+    p.set_val("thickness", t)
+    p.run_model()
+    r = p.model.fea.last_result
+    # mass agrees with MassComp (same aluminium density)
+    assert p.get_val("mass")[0] == pytest.approx(p.get_val("mass.mass")[0], rel=1e-12)
+    assert p.get_val("mass")[0] == pytest.approx(_face_thickness_mass(mesh, t, ANALYSIS_MATERIAL["rho"]))
+    # the lift-like pressure on the lower bays pushes the wing up; the largest deflection is at the tip
+    up = np.asarray(layout["wings"][0]["up"])
+    assert p.get_val("tip_deflection")[0] > 0
+    k = np.argmax(np.abs(r.displacement @ up))
+    assert mesh.points[k, 1] > 0.9 * SPAN
+    # the root (the end cap at y = 0) is clamped
+    assert np.all(mesh.points[r.clamped, 1] < 1e-6)
+    assert np.abs(r.displacement[r.clamped]).max() < 1e-12 * np.abs(r.displacement).max()
+    np.testing.assert_allclose(r.load / np.linalg.norm(r.load), up, atol=1e-12)
+    # stresses: the KS of each family bounds that family's largest element stress; empty families give 0
+    ks = p.get_val("ks_von_mises")
+    counts = np.bincount(mesh.component, minlength=n)
+    for f in range(n):
+        vmax = r.von_mises[mesh.component == f].max() if counts[f] else 0.0
+        assert vmax * (1 - 1e-12) <= ks[f] <= vmax * (1 + np.log(max(counts[f], 1)) / 50) + 1e-9
+    assert p.get_val("max_von_mises")[0] == pytest.approx(r.von_mises.max())
+    assert p.get_val("max_von_mises")[0] > 0
+    # the kept deck is all S4 (the pipeline mesh is all quads) with one shell section per non-empty family
+    deck = (tmp_path / "run" / "shell.inp").read_text()
+    assert deck.count("*SHELL SECTION") == int((counts > 0).sum())
+    assert ("TYPE=S3" in deck) == bool(mesh.n_tris) and "TYPE=S4" in deck
+
+
+@needs_ccx
+def test_calculix_comp_root_rib_clamp_and_tip_nodes(wing):
+    """clamp='root_rib' holds the wing at its root rib (3% span): every rib_0 node is clamped; the
+    tip deflection is measured at the given tip-cap nodes (the one of largest |u.up|)."""
+    mesh, layout = wing
+    rib0 = mesh.component_names.index("wing/rib_0")
+    tip = np.flatnonzero(mesh.points[:, 1] > SPAN - 1e-6)
+    tip = tip[np.isin(tip, mesh.faces)]
+    p = om.Problem()
+    p.model.add_subsystem("fea", CalculixShellAnalysis(mesh=mesh, layout=layout, clamp="root_rib", tip_nodes=tip,
+                                                       pressure=2.0e4), promotes=["*"])
+    p.setup()
+    p.run_model()
+    r = p.model.fea.last_result
+    f = mesh.faces[mesh.component == rib0]
+    assert set(f[f >= 0].tolist()) <= set(r.clamped.tolist())
+    d = r.displacement[tip] @ np.asarray(layout["wings"][0]["up"])
+    assert p.get_val("tip_deflection")[0] == pytest.approx(d[np.argmax(np.abs(d))]) and d.min() > 0
+
+
+def _box_with_families() -> ShellMesh:
+    """Small closed quad box (x 0.4, y 2, z in +-0.05; 10 cm quads) with families 'skin' (webs and
+    caps), top flange, bottom flange and an empty 'box/rib_0'."""
+    B, L, H = 0.4, 2.0, 0.1
+    xs, ys, zs = np.linspace(0, B, 5), np.linspace(0, L, 21), np.linspace(-H / 2, H / 2, 2)
+    X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
+    pts = np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1)
+    on = (np.isclose(pts[:, 0], 0) | np.isclose(pts[:, 0], B) | np.isclose(pts[:, 1], 0) | np.isclose(pts[:, 1], L)
+          | np.isclose(np.abs(pts[:, 2]), H / 2))
+    idx = np.full(len(pts), -1)
+    idx[on] = np.arange(on.sum())
+    shape = (len(xs), len(ys), len(zs))
+    faces = []
+    for ax in range(3):                       # axis-aligned unit squares of the lattice on the box surface
+        a1, a2 = [d for d in range(3) if d != ax]
+        for side in (0, shape[ax] - 1):
+            r1, r2 = np.meshgrid(np.arange(shape[a1] - 1), np.arange(shape[a2] - 1), indexing="ij")
+            c = np.zeros((r1.size, 3), np.int64)
+            c[:, ax], c[:, a1], c[:, a2] = side, r1.ravel(), r2.ravel()
+            corners = []
+            for d1, d2 in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                cc = c.copy()
+                cc[:, a1] += d1
+                cc[:, a2] += d2
+                corners.append(idx[np.ravel_multi_index(cc.T, shape)])
+            faces.append(np.stack(corners, 1))
+    f = np.vstack(faces)
+    q = pts[on]
+    cen = q[f].mean(1)
+    nrm = np.cross(q[f[:, 2]] - q[f[:, 0]], q[f[:, 3]] - q[f[:, 1]])
+    inward = np.einsum("ij,ij->i", nrm, cen - [B / 2, L / 2, 0.0]) < 0
+    f[inward] = f[inward, ::-1]               # outward normals, consistent orientation
+    comp = np.zeros(len(f), np.int32)
+    comp[np.isclose(cen[:, 2], H / 2)] = 1
+    comp[np.isclose(cen[:, 2], -H / 2)] = 2
+    return ShellMesh(pts[on], f, comp, ["skin", "box/upper_skin/bay_0", "box/lower_skin/bay_0", "box/rib_0"])
+
+
+@needs_ccx
+def test_calculix_comp_fd_partials(monkeypatch):
+    m = _box_with_families()
+    calls = []
+    real = calculix_comp.analyse_shell
+    monkeypatch.setattr(calculix_comp, "analyse_shell", lambda *a, **k: calls.append(1) or real(*a, **k))
+    p = om.Problem()
+    p.model.add_subsystem("fea", CalculixShellAnalysis(mesh=m, up=[0, 0, 1], axis=1, pressure=1000.0),
+                          promotes=["*"])
+    p.setup()
+    p.set_val("thickness", [0.002, 0.003, 0.002, 0.001])
+    p.run_model()
+    calls.clear()
+    J = p.compute_totals(of=["mass", "tip_deflection", "ks_von_mises"], wrt=["thickness"])
+    assert len(calls) == 3                       # one ccx run per non-empty family; none for the empty one
+    rho = ANALYSIS_MATERIAL["rho"]
+    areas = np.bincount(m.component, weights=m.face_areas(), minlength=4)
+    np.testing.assert_allclose(J["mass", "thickness"][0], rho * areas, rtol=1e-6)
+    dtip = J["tip_deflection", "thickness"][0]
+    assert np.all(dtip[:3] < 0) and dtip[3] == 0  # thicker walls deflect less; the empty family does nothing
+    assert dtip[2] < dtip[1]                     # the loaded, stretched bottom flange matters most here
+    dks = J["ks_von_mises", "thickness"]
+    assert np.all(dks[3] == 0) and np.all(dks[:, 3] == 0)
+    assert dks[2, 2] < 0                         # a thicker bottom flange lowers its own stress
+
+
+def test_calculix_comp_setup_errors(tmp_path, monkeypatch):
+    m = _box_with_families()
+    p = om.Problem()
+    p.model.add_subsystem("fea", CalculixShellAnalysis(mesh=m, axis=1))
+    if _have_ccx():
+        with pytest.raises(SolverError, match="up"):
+            p.setup()
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("SHELLMESH_CCX", raising=False)
+    p = om.Problem()
+    p.model.add_subsystem("fea", CalculixShellAnalysis(mesh=m, up=[0, 0, 1]))
+    with pytest.raises(SolverError, match="apt-get install calculix-ccx"):
+        p.setup()
