@@ -41,6 +41,8 @@ __all__ = ["Layout", "WingLayout", "ExplicitMember", "MemberSpec", "load_layout"
 
 #: ``up`` must make at least this angle with the span line (else the rib normal is undefined).
 MIN_UP_SPAN_ANGLE_DEG = 10.0
+#: Upper bound of ``ribs.count`` (a typo guard: more ribs than this cannot be meshed anyway).
+MAX_RIBS = 10000
 
 _TOP_KEYS = ("wings", "members", "up")
 _WING_KEYS = ("name", "root_le", "root_te", "tip_le", "tip_te", "up", "ribs", "spars")
@@ -572,6 +574,9 @@ def _parse_wing(d, i) -> WingLayout:
             if n < 2:
                 raise LayoutError(f"{where}.ribs.count = {n} but needs at least 2 (root and tip ribs); "
                                   "omit 'ribs' for a wing without ribs, or use 'eta' for a single station")
+            if n > MAX_RIBS:
+                raise LayoutError(f"{where}.ribs.count = {n} is more than {MAX_RIBS} ribs: give the number of ribs "
+                                  "of the wing (a few to a few tens)")
             rib_count = int(n)
             rib_eta = tuple(float(v) for v in np.linspace(0.0, 1.0, rib_count))
         else:
@@ -627,9 +632,17 @@ def _parse_member(d, i) -> ExplicitMember:
 
 
 def _read_file(path: Path) -> dict:
+    if path.is_dir():
+        raise LayoutError(f"{path} is a folder, not a layout file; give the .json or .yaml file itself")
     if not path.is_file():
         raise LayoutError(f"layout file not found: {path}; check the path")
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise LayoutError(f"{path}: not a text file (byte {e.start} is not UTF-8): a layout is a JSON or YAML "
+                          "text file; give the right file or re-save it as UTF-8 text") from None
+    except OSError as e:
+        raise LayoutError(f"cannot read layout file {path}: {e.strerror or e}; check its permissions") from None
     suffix = path.suffix.lower()
     try:
         if suffix == ".json":

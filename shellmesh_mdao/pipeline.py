@@ -41,6 +41,8 @@ class PipelineOptions:
 
     ``remesh``            remesh the skin before imprinting (False: imprint into the input
                           triangulation as it is; for tests).
+    ``remesh_deviation``  chordal deviation allowed between the remeshed skin and the input, as a
+                          fraction of the remesh edge length (edges shrink where curvature needs it).
     ``split_time_limit``  HiGHS time limit (s) of the splitting LP/MIP.
     ``merge_time_limit``, ``merge_mip_gap``: HiGHS time limit (s) and relative gap of the
                           merging MIP.
@@ -52,11 +54,15 @@ class PipelineOptions:
                           ``final_iterations`` after it.
     ``guard_jacobian``    a subdivided element whose projected new nodes would bring its scaled
                           Jacobian to or below this keeps them at their linear position.
+    ``smooth_energy``     energy of both smoothing passes: ``"length"`` (sum of edge lengths) or
+                          ``"squared"`` (edges aim at the target length: twice ``size`` before
+                          subdivision, ``size`` after); see :func:`~shellmesh_mdao.smooth.smooth`.
     ``smooth_jacobian``   no smoothing step before subdivision may bring an element to or below
                           this scaled Jacobian (nor lower one already below it).
     """
 
     remesh: bool = True
+    remesh_deviation: float = 0.1
     split_time_limit: float = 60.0
     merge_time_limit: float = 60.0
     merge_mip_gap: float = 0.01
@@ -65,6 +71,7 @@ class PipelineOptions:
     final_iterations: int = 10
     guard_jacobian: float = 0.2
     smooth_jacobian: float = 0.4
+    smooth_energy: str = "length"
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "PipelineOptions":
@@ -86,6 +93,9 @@ class PipelineOptions:
                 raise ShellMeshError(f"solver option {k!r} must be a {typ.__name__}, got {v!r}") from None
             if typ in (int, float) and not (np.isfinite(out[k]) and out[k] >= 0):
                 raise ShellMeshError(f"solver option {k!r} must be a finite non-negative number, got {v!r}")
+        if out.get("smooth_energy", "length") not in ("length", "squared"):
+            raise ShellMeshError(f"solver option 'smooth_energy' must be 'length' or 'squared', got "
+                                 f"{out['smooth_energy']!r}")
         return cls(**out)
 
 
@@ -183,17 +193,16 @@ def _need(state: PipelineState, stage: str) -> None:
 def stage_load(surface, size, options=None) -> PipelineState:
     """Read the input skin (path or :class:`ShellMesh`), check ``size`` against it, split any
     quads into triangles and build its BVH locator."""
-    from .load import load_surface
+    from .load import repair_surface
     from .project import SurfaceLocator
 
     opts = PipelineOptions.from_dict(options)
     report: dict = {"inputs": {"surface": str(surface) if not isinstance(surface, ShellMesh) else "<mesh>",
                                "size": size, "options": dataclasses.asdict(opts)}, "stages": {}}
-    if isinstance(surface, ShellMesh):
-        skin_in = surface
-    else:
-        skin_in, srep = load_surface(surface)
-        report["surface"] = srep.to_dict()
+    # handles or refuses dirty CAD input: duplicates, orientation, intersecting bodies, half
+    # models (docs/troubleshooting.md)
+    skin_in, srep = repair_surface(surface)
+    report["surface"] = srep.to_dict()
     h = check_size(size, skin_in.diagonal)
     if skin_in.n_quads:
         tris, _ = skin_in.triangles()
@@ -231,7 +240,9 @@ def stage_remesh(state: PipelineState) -> PipelineState:
     _need(state, "remesh")
     skin = state.surface
     if state.options.remesh:
-        skin = remesh_skin(state.surface, REMESH_FACTOR * state.size, locator=state.locator)
+        target = REMESH_FACTOR * state.size
+        skin = remesh_skin(state.surface, target, max_deviation=state.options.remesh_deviation * target,
+                           locator=state.locator)
     return state.but(mesh=skin, stage="remesh")
 
 
@@ -314,7 +325,8 @@ def stage_smooth(state: PipelineState) -> PipelineState:
     # a triangle's scaled Jacobian bounds its three child quads' after subdivision: keep every
     # element above smooth_jacobian (0.4: triangle angles >= ~20 deg, children above ~0.3)
     mesh, res = smooth(state.mesh, state.supports, iterations=state.options.smooth_iterations,
-                       min_jacobian=state.options.smooth_jacobian)
+                       min_jacobian=state.options.smooth_jacobian, energy=state.options.smooth_energy,
+                       target_edge=REMESH_FACTOR * state.size)
     st = state.but(mesh=mesh, stage="smooth")
     st.report["smooth"] = _smooth_report(res)
     return st
@@ -330,7 +342,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     o = state.options
     q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
     if o.final_iterations:
-        q, res = smooth(q, sup, iterations=o.final_iterations)
+        q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size)
     st = state.but(mesh=q, supports=sup, stage="quad")
     if o.final_iterations:
         st.report["final_smooth"] = _smooth_report(res)

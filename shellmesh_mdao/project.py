@@ -156,6 +156,15 @@ class SurfaceLocator:
         self._embree = None
         self._v2t = None
 
+    def __getstate__(self):
+        # the trees are native objects: rebuilt lazily after unpickling / deep-copying
+        st = dict(self.__dict__)
+        st["_aabb"] = st["_embree"] = None
+        return st
+
+    def __setstate__(self, st):
+        self.__dict__.update(st)
+
     @classmethod
     def from_mesh(cls, mesh) -> "SurfaceLocator":
         """Locator on a :class:`~shellmesh_mdao.mesh.ShellMesh` (quads split (0,1,2),(0,2,3));
@@ -409,7 +418,9 @@ class ProjectedMember:
     members: on the chord plane and the member plane; explicit members: the ``upper``
     polyline), ``upper``/``lower`` (k,3) their projections and ``upper_tri``/``lower_tri``
     (k,) the surface triangles hit (explicit members: ``lower_seeds`` holds the lower
-    polyline, which may have a different length)."""
+    polyline, which may have a different length, and ``upper_normal``/``lower_normal`` the
+    unit normals of the triangles hit, which give the projection direction of a point that
+    already lies on the skin when no direction is given)."""
 
     name: str
     kind: str
@@ -419,6 +430,17 @@ class ProjectedMember:
     upper_tri: np.ndarray
     lower_tri: np.ndarray
     lower_seeds: np.ndarray | None = None
+    upper_normal: np.ndarray | None = None
+    lower_normal: np.ndarray | None = None
+
+
+def _tri_normals(locator: SurfaceLocator, tri: np.ndarray) -> np.ndarray:
+    """Unit normals of the locator's triangles ``tri`` (zero for a degenerate triangle)."""
+    t = locator.triangles[np.asarray(tri, np.int64)]
+    L = locator._local
+    n = np.cross(L[t[:, 1]] - L[t[:, 0]], L[t[:, 2]] - L[t[:, 0]])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
 
 def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
@@ -453,5 +475,6 @@ def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
         up_p, up_t = project_polyline(locator, m.upper, m.direction, name=m.name)
         lo_p, lo_t = project_polyline(locator, m.lower, m.lower_direction, name=m.name)
         out[m.name] = ProjectedMember(m.name, m.kind, m.upper.copy(), up_p, lo_p, up_t, lo_t,
-                                      lower_seeds=m.lower.copy())
+                                      lower_seeds=m.lower.copy(), upper_normal=_tri_normals(locator, up_t),
+                                      lower_normal=_tri_normals(locator, lo_t))
     return {m.name: out[m.name] for m in specs}

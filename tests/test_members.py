@@ -506,14 +506,15 @@ def test_wing_junction_lines_are_straight_along_up(wing_case):
 @pytest.mark.slow
 @pytest.mark.parametrize("spars", [(0.15, 0.65), (0.15, 0.4, 0.65)], ids=["2spar", "3spar"])
 def test_corpus_members(manifest, geometry_dir, spars):
-    """Every corpus geometry, 10 ribs per wing, through the pipeline (remeshed skin) at the
-    corpus sizes."""
+    """Every corpus geometry, 10 ribs per wing, through the pipeline's members stage (remeshed
+    skin) at the corpus sizes."""
     sizes = {"cessna210": 0.25, "swept_wing": 0.02, "straight_wing": 0.02, "bwb": 0.3}
     failures = []
     for name, g in manifest["geometries"].items():
         lay = layout_from_manifest(manifest, name, spars=spars)
         try:                                   # collect, so one geometry does not hide another
-            r, infos, size, mesh = _wing_case(str(geometry_dir / g["file"]), lay, sizes[name], remesh=True)
+            r = run_pipeline(str(geometry_dir / g["file"]), lay, sizes[name], until="members", progress=False)
+            infos, mesh = r.state.infos, r.mesh
             n_skin_faces = int((~member_face_mask(mesh, [m.name for m in infos])).sum())
             check_member_mesh(mesh, n_skin_faces, infos)
             assert_exact_areas(r, mesh)
