@@ -7,9 +7,13 @@ PYTEST_ARGS ?=
 
 .PHONY: install install-test install-system demo test test-fast
 
-# System packages: the CalculiX solver (ccx) for the structural analysis.
+# System packages (Debian): the CalculiX solver (ccx) for the structural analysis, and EGL with
+# Mesa's software renderer for off-screen pictures (pyvista/VTK). Installed only when missing.
+SYSTEM_PACKAGES = calculix-ccx libegl1 libgl1-mesa-dri
 install-system:
-	@command -v ccx >/dev/null 2>&1 || (apt-get update -qq && apt-get install -y -qq calculix-ccx >/dev/null)
+	@if ! command -v ccx >/dev/null 2>&1 || ! ldconfig -p | grep -q 'libEGL.so.1' \
+	    || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1; then \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(SYSTEM_PACKAGES) >/dev/null; fi
 
 install: install-system
 	$(PYTHON) -m pip install --quiet -e .
