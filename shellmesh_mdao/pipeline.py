@@ -24,11 +24,15 @@ import numpy as np
 
 from .errors import SizeError, ShellMeshError
 from .mesh import ShellMesh
+from .quality import scaled_jacobian
 
 log = logging.getLogger("shellmesh_mdao")
 
 #: Stages in order; ``--until`` takes one of these.
 STAGES = ("load", "layout", "project", "remesh", "imprint", "members", "split", "merge", "smooth", "quad")
+
+#: Elements at or below this scaled Jacobian are reported (count, ids) and logged as a warning.
+POOR_JACOBIAN = 0.2
 
 #: The skin is remeshed at this multiple of the final quad size: merging pairs triangles into
 #: quads and the final subdivision halves every edge.
@@ -346,6 +350,16 @@ def stage_quad(state: PipelineState) -> PipelineState:
     st = state.but(mesh=q, supports=sup, stage="quad")
     if o.final_iterations:
         st.report["final_smooth"] = _smooth_report(res)
+    sj = scaled_jacobian(q.points, q.faces)
+    poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),
+                                  "folded": int((sj <= 0).sum()), "elements": poor[:100].tolist(),
+                                  "min_scaled_jacobian": float(sj.min()) if len(sj) else None}
+    if len(poor):
+        where = sorted({q.component_names[c] for c in q.component[poor]})
+        log.warning("%d element(s) with scaled Jacobian <= %.1f (min %.3f) in %s: they come from sliver triangles "
+                    "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
+                    len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
     return st
 
 

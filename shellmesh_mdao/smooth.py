@@ -1085,7 +1085,8 @@ def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
     plane; every other face lies on the input skin. Feature edges of member ``k`` (its chains,
     its junction and end lines) slide on the exact section of the input skin with the member's
     plane or on the straight junction lines; geometric feature edges (id -1: trailing edges,
-    tips, creases) slide on their own polylines. Chain and junction vertices may slide
+    tips, creases) slide on their own polylines. Nodes of non-planar members (kinked explicit
+    members, Coons patches) are fixed. Chain and junction vertices may slide
     (``sliding=True``); crossings, corners and curve ends stay fixed (:func:`derive_supports`).
     """
     from .section import Plane, plane_section
@@ -1111,7 +1112,20 @@ def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
             polys += [(sec.nodes[ix], cl) for ix, cl in polylines_from_edges(sec.nodes, sec.links)]
         polys += [(mesh.points[ix], cl) for ix, cl in polylines_from_edges(mesh.points, fe[fid == i])]
         curves[int(i)] = polys
-    return derive_supports(mesh, skin, planes, curves, sliding=True)
+    sup = derive_supports(mesh, skin, planes, curves, sliding=True)
+    # a non-planar member (a kinked explicit member meshed panel by panel, or a Coons patch)
+    # has no single surface to slide on: its nodes stay where the members stage put them, and
+    # new nodes in its faces stay at their linear positions
+    nonplanar = np.array([i for i, inf in owner.items() if inf.plane_normal is None], np.int64)
+    if len(nonplanar):
+        sup.comp_kind[nonplanar] = FIXED
+        sup.comp_ref[nonplanar] = -1
+        on = np.isin(mesh.component, nonplanar)
+        v = mesh.faces[on]
+        v = v[v >= 0]
+        sup.kind[v] = FIXED
+        sup.ref[v] = -1
+    return sup
 
 
 def edge_midpoint_projector(mesh: ShellMesh, supports: Supports):
