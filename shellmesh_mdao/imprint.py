@@ -673,8 +673,11 @@ def chain_specs(layout, projected) -> list:
     from inside the wing). A rib or spar gives an upper and a lower chain between its
     bounding planes; a full-chord rib (fewer than two spars) one closed loop. Explicit
     members give one chain per side, each the union of the sections of the planes spanned by
-    a polyline segment and its projection direction.
+    a polyline segment and its projection direction (one :class:`ChainSpec` per segment,
+    sides ``upper_<s>``/``lower_<s>``). Raises :class:`~shellmesh_mdao.errors.LayoutError` when
+    an explicit member lies in the plane of another member and their areas overlap.
     """
+    _check_coplanar_overlaps(layout.members(), projected)
     specs = []
     for m in layout.members():
         pm = projected[m.name]
@@ -692,15 +695,58 @@ def chain_specs(layout, projected) -> list:
     return specs
 
 
+def _check_coplanar_overlaps(members, projected, tol: float = 1e-9) -> None:
+    """Two members in one plane whose areas overlap (at least one of them explicit) are a
+    :class:`~shellmesh_mdao.errors.LayoutError` naming both, raised before the imprint would
+    cut the same skin curve twice. A member's area is taken as the polygon of its projected
+    upper points followed by its projected lower points (reversed); explicit members count
+    when their layout is planar (:func:`~shellmesh_mdao.members.explicit_plane`)."""
+    from .errors import LayoutError
+    from .members import _frame_from_normal, _interior_samples, _point_in_polygon, _to2d, explicit_plane
+
+    polys = []
+    for m in members:                                     # loop over members
+        pm = projected[m.name]
+        if m.kind == "explicit":
+            pp, pn = explicit_plane(m)
+        else:
+            pp, pn = m.plane_point, m.plane_normal
+        if pn is None:
+            continue
+        up, lo = np.asarray(pm.upper, float), np.asarray(pm.lower, float)
+        if np.linalg.norm(up[0] - lo[-1]) + np.linalg.norm(up[-1] - lo[0]) < \
+                np.linalg.norm(up[0] - lo[0]) + np.linalg.norm(up[-1] - lo[-1]):
+            lo = lo[::-1]
+        polys.append((m, np.asarray(pp, float), np.asarray(pn, float), np.vstack([up, lo[::-1]])))
+    for i in range(len(polys)):                           # loop over member pairs (a few dozen members)
+        mi, pi, ni, qi = polys[i]
+        for j in range(i + 1, len(polys)):
+            mj, pj, nj, qj = polys[j]
+            if mi.kind != "explicit" and mj.kind != "explicit":
+                continue
+            scale = float(np.linalg.norm(np.ptp(np.vstack([qi, qj]), axis=0)))
+            if np.linalg.norm(np.cross(ni, nj)) > tol or abs((pj - pi) @ ni) > tol * scale:
+                continue
+            e1, e2, o = _frame_from_normal(ni, pi)
+            a2, b2 = _to2d(qi, e1, e2, o), _to2d(qj, e1, e2, o)
+            eps = 1e-6 * scale
+            sa = np.vstack([a2, 0.5 * (a2 + np.roll(a2, -1, 0)), _interior_samples(a2)])
+            sb = np.vstack([b2, 0.5 * (b2 + np.roll(b2, -1, 0)), _interior_samples(b2)])
+            if _point_in_polygon(sb, a2, eps).any() or _point_in_polygon(sa, b2, eps).any():
+                raise LayoutError(f"members '{mi.name}' and '{mj.name}' lie in the same plane and overlap; remove "
+                                  "one of them or move it so their areas do not overlap")
+
+
 def _explicit_chain_specs(m, pm) -> list:
     """Explicit member: for each side, one chain piece per polyline segment: the plane through
     the segment's two projected points containing the projection direction (or, without a
-    direction, the segment's two seeds and projections), bounded by the planes through the
-    segment ends normal to the segment."""
+    direction, the mean of the two points' projection offsets ``hit - seed``; a point that
+    already lies on the skin uses the normal of the triangle it lies on), bounded by the
+    planes through the segment ends normal to the segment."""
     out = []
-    for side, seeds, hits, tris, direction in (
-            ("upper", pm.seeds, pm.upper, pm.upper_tri, m.direction),
-            ("lower", pm.lower_seeds if pm.lower_seeds is not None else pm.seeds, pm.lower, pm.lower_tri,
+    for side, seeds, hits, normals, direction in (
+            ("upper", pm.seeds, pm.upper, pm.upper_normal, m.direction),
+            ("lower", pm.lower_seeds if pm.lower_seeds is not None else pm.seeds, pm.lower, pm.lower_normal,
              m.lower_direction)):
         for s in range(len(hits) - 1):
             a, b = hits[s], hits[s + 1]
@@ -711,7 +757,7 @@ def _explicit_chain_specs(m, pm) -> list:
             if direction is not None:
                 dvec = np.asarray(direction, float)
             else:
-                dvec = 0.5 * ((hits[s] - seeds[s]) + (hits[s + 1] - seeds[s + 1]))
+                dvec = _closest_point_direction(m.name, side, s, seeds, hits, normals, float(np.linalg.norm(ab)))
             nrm = np.cross(ab, dvec)
             if np.linalg.norm(nrm) <= 1e-12 * np.linalg.norm(ab) * max(np.linalg.norm(dvec), 1e-300):
                 raise ImprintError(f"{m.name}: segment {s} of its {side} curve is parallel to its projection "
@@ -720,6 +766,31 @@ def _explicit_chain_specs(m, pm) -> list:
             seed = 0.5 * (a + b)
             out.append(ChainSpec(m.name, f"{side}_{s}", Plane.make(a, nrm), bounds, seed, -1))
     return out
+
+
+def _closest_point_direction(name, side, s, seeds, hits, normals, length) -> np.ndarray:
+    """Projection direction of segment ``s`` of a polyline projected to the closest skin points:
+    the mean of the unit offsets ``hit - seed`` of its two ends; an end that lies on the skin
+    (offset below 1e-9 of the segment length) takes the normal of its skin triangle instead,
+    turned to agree with the other end."""
+    dirs = []
+    for k in (s, s + 1):
+        off = np.asarray(hits[k], float) - np.asarray(seeds[k], float)
+        ln = float(np.linalg.norm(off))
+        dirs.append(off / ln if ln > 1e-9 * length else None)
+    for i in (0, 1):
+        if dirs[i] is None and normals is not None and np.linalg.norm(normals[s + i]) > 0:
+            nv = np.asarray(normals[s + i], float)
+            ref = dirs[1 - i]
+            dirs[i] = -nv if ref is not None and nv @ ref < 0 else nv
+    if dirs[0] is None and dirs[1] is None:
+        raise ImprintError(f"{name}: the ends of segment {s} of its {side} polyline lie on the skin and no "
+                           "'direction' is given; give a projection direction")
+    if dirs[0] is None or dirs[1] is None:
+        return dirs[0] if dirs[1] is None else dirs[1]
+    if dirs[0] @ dirs[1] < 0:                      # the ends lie on opposite sides of the skin
+        dirs[1] = -dirs[1]
+    return dirs[0] + dirs[1]
 
 
 def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
@@ -964,40 +1035,699 @@ def _angles3(Pn):
     return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
 
 
-def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain: float = 0.5) -> ShellMesh:
-    """Raise the smallest angles of the imprinted triangle skin: angle-improving flips of
-    edges that are not chains or feature lines, tangential smoothing of free vertices
-    (projected back onto the input surface) and sliding of chain vertices along their exact
-    arc (crossings and chain ends stay). Every move keeps the vertex on the input surface or
-    on its arc and never flips a triangle."""
+def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain: float = 0.5,
+                 min_angle: float = 10.0, passes: int = 8, max_repairs: int | None = None) -> ShellMesh:
+    """Raise the smallest angles of the imprinted triangle skin to at least ``min_angle``
+    degrees where possible.
+
+    1. Vectorised rounds: angle-improving flips of edges that are not chains or feature
+       lines, tangential smoothing of free vertices (projected back onto the input surface)
+       and sliding of chain vertices along their exact arc (crossings and chain ends stay).
+    2. Local repair of the few triangles still below ``min_angle + 0.5`` (chain vertices
+       packed closer than the element size, a chain ending or crossing a crease a fraction of
+       an element from the crease's next vertex, oblique members crossing): per bad triangle
+       the best of edge collapse (a free vertex into a neighbour; a chain or crease vertex
+       along its line), edge split (on the input surface, on the exact arc, on the input's
+       sharp edge) and vertex relocation (on the surface, along the arc, along the sharp
+       edge), each followed by local flips, is kept when it improves the angles around it.
+       Crossings, chain ends, chain/crease crossings and corners never move; every feature
+       line is kept. At most ``max_repairs`` triangles are attempted, worst first (default
+       ``32 + n_faces // 4000``): the repair is for the few spots imprinting leaves on a
+       remeshed skin, not for remeshing a raw triangulation (``remesh=False``).
+
+    Every vertex stays on the input surface, chain vertices on their arc (so on their member
+    plane), crease vertices on the input's sharp edges; no face is turned over. When vertices
+    are removed or inserted the skin is renumbered and each chain's ``vertices`` (a
+    :class:`ChainResult` of ``chains``) is updated in place to the returned mesh.
+    """
     P = mesh.points.copy()
     T = mesh.faces[:, :3].copy()
-    n = len(P)
-    locked = mesh.feature_edges
+    fe, fid = mesh.feature_edges, mesh.feature_edge_ids
+    fixed = np.zeros(len(P), bool)
+    fixed[mesh.fixed_vertices] = True
+    arcs = [c.arc for c in chains]
+    chain_vs = [np.asarray(c.vertices, np.int64) for c in chains]
+    kind, chain_of = _skin_roles(len(P), fe, fid, fixed, chain_vs, arcs)
+    movable = (kind == _FREE) | (kind == _CHAIN)
+    with np.errstate(invalid="ignore"):
+        for _ in range(rounds):
+            T, nf = _flip_round(P, T, fe, min_gain=min_gain)
+            P, nm = _smooth_round(P, T, movable, locator, chain_of, arcs)
+            if nf == 0 and nm == 0:
+                break
+    C = mesh.component
+    target = min_angle + 0.5
+    if len(T) and _tri_angles_min(P, T).min() < target:
+        names = list(mesh.component_names)
+        member = np.array([names.index(c.member) if c.member in names else -2 for c in chains], np.int64)
+        W = _SkinPatch(P, T, C, fe, fid, kind, chain_of, chain_vs, arcs, member, locator)
+        budget = 32 + len(T) // 4000 if max_repairs is None else int(max_repairs)
+        for _ in range(passes):               # loops over the few bad triangles only
+            n_fixed = 0
+            for f in W.bad_faces(target).tolist():
+                if budget <= 0:
+                    break
+                if W.alive[f] and _min_angles_small(W.P[W.T[f:f + 1]])[0] < target:
+                    budget -= 1
+                    n_fixed += W.repair_face(f, cap=2.0 * target)
+            if not n_fixed or budget <= 0:
+                break
+        P, T, C, fe, fid, chain_vs, remap = W.export()
+        old_fixed = remap[np.flatnonzero(fixed)]
+        fixed = np.zeros(len(P), bool)
+        fixed[old_fixed[old_fixed >= 0]] = True
+        for c, v in zip(chains, chain_vs):
+            fixed[v] = True
+            c.vertices = v
+    return ShellMesh(P, T, C, mesh.component_names, np.flatnonzero(fixed), fe, fid)
+
+
+# ----------------------------------------------------------------------------- local skin repair
+# improve_skin's vectorised flips and smoothing leave a few triangles below the angle bound
+# where the imprint packed chain vertices closer than the element size, where a chain ends
+# or crosses a crease a fraction of an element away from the crease's next vertex, or where
+# two oblique members cross. These spots (a handful per model) are repaired one by one on a
+# small editable copy of the skin (_SkinPatch): for each bad triangle every candidate
+# operation (edge collapse, edge split, vertex relocation, each followed by local
+# angle-improving flips) is tried, rolled back, and the best kept if it improves the local
+# angle distribution. Vertex roles decide what an operation may do:
+_FREE, _CHAIN, _CREASE, _FIXED, _DEAD = 0, 1, 2, 3, 4
+#   _FREE    on the input surface only: moves on the surface, may be collapsed into a neighbour
+#   _CHAIN   inside one member chain (not a crossing/end): slides along its exact arc, may be
+#            collapsed along its chain into a chain neighbour
+#   _CREASE  inside a geometric feature line (2 crease edges, not a corner): slides along the
+#            input's sharp edges, may be collapsed along the line into a line neighbour
+#   _FIXED   crossings, chain ends, chain/crease crossings, corners, caller-fixed vertices
+_MISSING = object()
+_KEY = 1 << 31
+
+
+def _skin_roles(n, fe, fid, fixed, chain_vs, arcs):
+    """Role (_FREE/_CHAIN/_CREASE/_FIXED) and chain index (or -1) of every skin vertex."""
+    kind = np.full(n, _FREE, np.int8)
     chain_of = np.full(n, -1, np.int64)
-    arcs = []
-    ends = np.zeros(n, bool)
-    for i, c in enumerate(chains):
-        v = c.vertices
-        inner = v if c.arc.closed else v[1:-1]
-        chain_of[inner] = np.where(chain_of[inner] >= 0, -2, i)       # -2: on two chains (crossing)
-        if not c.arc.closed:
-            ends[v[[0, -1]]] = True
-        arcs.append(c.arc)
-    feat_v = np.zeros(n, bool)
-    feat_v[mesh.feature_edges[mesh.feature_edge_ids < 0].ravel()] = True
-    crossing = (chain_of == -2) | ends
-    movable = ~crossing & ~feat_v
-    # vertices fixed by the caller that are not chain vertices stay fixed
-    extra_fixed = np.zeros(n, bool)
-    extra_fixed[mesh.fixed_vertices] = True
-    movable &= ~(extra_fixed & (chain_of < 0))
-    chain_of = np.where(chain_of == -2, -1, chain_of)
-    for _ in range(rounds):
-        T, nf = _flip_round(P, T, locked, min_gain=min_gain)
-        P, nm = _smooth_round(P, T, movable, locator, chain_of, arcs)
-        if nf == 0 and nm == 0:
-            break
-    # reorder faces as given (flips keep face slots), keep component per slot
-    return ShellMesh(P, T, mesh.component, mesh.component_names, mesh.fixed_vertices, mesh.feature_edges,
-                     mesh.feature_edge_ids)
+    cnt = np.zeros(n, np.int64)
+    end = np.zeros(n, bool)
+    for i, (v, arc) in enumerate(zip(chain_vs, arcs)):      # one pass per chain
+        cnt[v] += 1
+        chain_of[v] = i
+        if not arc.closed:
+            end[v[[0, -1]]] = True
+    crease_deg = np.bincount(fe[fid < 0].ravel(), minlength=n)
+    on_chain = cnt > 0
+    kind[fixed & ~on_chain] = _FIXED
+    kind[crease_deg > 0] = _FIXED
+    kind[(crease_deg == 2) & ~fixed & ~on_chain] = _CREASE
+    kind[on_chain] = _CHAIN
+    kind[(cnt > 1) | end | (on_chain & (crease_deg > 0))] = _FIXED
+    chain_of[kind != _CHAIN] = -1
+    return kind, chain_of
+
+
+def _closest_on_segments(q, a, b):
+    """Closest points on a set of segments a-b (s, 3) to query points q (n, 3), and their
+    distances (KD-tree of segment midpoints with a conservative candidate radius)."""
+    q = np.atleast_2d(q)
+    ab = b - a
+    L = np.linalg.norm(ab, axis=1)
+    tree = cKDTree(0.5 * (a + b))
+    d0, _ = tree.query(q)
+    cand = tree.query_ball_point(q, d0 + 0.5 * L.max() + 1e-300)
+    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
+    qi = np.repeat(np.arange(len(q)), cnt)
+    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
+    L2 = np.einsum("ij,ij->i", ab[si], ab[si])
+    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    x = a[si] + t[:, None] * ab[si]
+    dist = np.linalg.norm(x - q[qi], axis=1)
+    order = np.lexsort((si, dist, qi))
+    first = np.ones(len(order), bool)
+    first[1:] = qi[order][1:] != qi[order][:-1]
+    return x[order[first]], dist[order[first]]
+
+
+def _min_angles_small(X):
+    """Smallest interior angle (degrees) of triangles given by their corners (t, 3, 3); the
+    same as :func:`_angles3` with fewer array operations (for the few faces of a repair)."""
+    e = X[:, [1, 2, 0]] - X                                   # e[:, i]: corner i -> i + 1
+    l2 = np.einsum("tij,tij->ti", e, e)
+    ep = e[:, [2, 0, 1]]                                      # edge arriving at corner i
+    cos = -np.einsum("tij,tij->ti", e, ep) / np.maximum(np.sqrt(l2 * l2[:, [2, 0, 1]]), 1e-300)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).min(1)
+
+
+def _unit_normals(X):
+    """Unit normals of triangles given by their corners (t, 3, 3); zero for degenerate ones."""
+    u = X[:, 1] - X[:, 0]
+    v = X[:, 2] - X[:, 0]
+    n = np.empty_like(u)
+    n[:, 0] = u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1]
+    n[:, 1] = u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2]
+    n[:, 2] = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    ln = np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
+    return np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), 0.0)
+
+
+class _SkinPatch:
+    """Editable triangle skin for the local repairs of :func:`improve_skin`: per-vertex face
+    lists (CSR plus overrides for the touched vertices), feature edges (sorted keys plus
+    overrides), vertex roles and chains, all changed through methods that write an undo
+    journal, so a candidate operation can be tried and rolled back. Work per operation is
+    local (the faces around a few vertices)."""
+
+    COS_TURN = np.cos(np.radians(45.0))        # no face may turn more than this in one operation
+    COS_FLIP = np.cos(np.radians(35.0))        # largest dihedral across a flipped edge
+
+    def __init__(self, P, T, C, fe, fid, kind, chain_of, chains, arcs, chain_member, locator):
+        n, m = len(P), len(T)
+        self.P = np.zeros((n + 64, 3))
+        self.P[:n] = P
+        self.n = n
+        self.T = np.zeros((m + 128, 3), np.int64)
+        self.T[:m] = T
+        self.m = m
+        self.C = np.zeros(m + 128, C.dtype)
+        self.C[:m] = C
+        self.alive = np.zeros(m + 128, bool)
+        self.alive[:m] = True
+        self.kind = np.full(n + 64, _DEAD, np.int8)
+        self.kind[:n] = kind
+        self.chain_of = np.full(n + 64, -1, np.int64)
+        self.chain_of[:n] = chain_of
+        self.ptr, self.star = vertex_faces(T, n)
+        self.over = {}
+        keys = fe[:, 0] * _KEY + fe[:, 1]
+        o = np.argsort(keys, kind="stable")
+        self.fkeys, self.fids = keys[o], np.asarray(fid)[o]
+        self.fover = {}
+        self.chains = list(chains)
+        self.arcs = arcs
+        self.chain_member = chain_member
+        self.locator = locator
+        self.eps = 1e-9 * locator.diagonal
+        self._soup = None
+        self.journal = []
+        self.region = None
+        self.killed_out = []
+        self.applied = {"collapse": 0, "split": 0, "move": 0, "flip": 0}
+
+    # ------------------------------------------------------------ journaled storage
+    def _grow(self):
+        if self.n + 1 >= len(self.P):
+            k = len(self.P)
+            self.P = np.vstack([self.P, np.zeros((k, 3))])
+            self.kind = np.concatenate([self.kind, np.full(k, _DEAD, np.int8)])
+            self.chain_of = np.concatenate([self.chain_of, np.full(k, -1, np.int64)])
+        if self.m + 4 >= len(self.T):
+            k = len(self.T)
+            self.T = np.vstack([self.T, np.zeros((k, 3), np.int64)])
+            self.C = np.concatenate([self.C, np.zeros(k, self.C.dtype)])
+            self.alive = np.concatenate([self.alive, np.zeros(k, bool)])
+
+    def faces(self, v):
+        r = self.over.get(v)
+        if r is not None:
+            return r
+        if v < len(self.ptr) - 1:
+            return self.star[self.ptr[v]:self.ptr[v + 1]]
+        return np.zeros(0, np.int64)
+
+    def _set_over(self, v, arr):
+        self.journal.append(("over", v, self.over.get(v, _MISSING)))
+        self.over[v] = arr
+
+    def kill(self, f):
+        if self.region is not None and f not in self.region:
+            self.killed_out.append(float(_min_angles_small(self.P[self.T[f:f + 1]])[0]))
+        self.journal.append(("kill", f))
+        self.alive[f] = False
+        for v in self.T[f].tolist():
+            fs = self.faces(v)
+            self._set_over(v, fs[fs != f])
+
+    def add(self, tri, comp):
+        self._grow()
+        f = self.m
+        self.T[f] = tri
+        self.C[f] = comp
+        self.alive[f] = True
+        self.m += 1
+        self.journal.append(("add",))
+        for v in self.T[f].tolist():
+            self._set_over(v, np.append(self.faces(v), f))
+        return f
+
+    def set_point(self, v, x):
+        self.journal.append(("P", v, self.P[v].copy()))
+        self.P[v] = x
+
+    def add_point(self, x, kind, chain):
+        self._grow()
+        v = self.n
+        self.P[v] = x
+        self.kind[v] = kind
+        self.chain_of[v] = chain
+        self.n += 1
+        self.journal.append(("addP",))
+        return v
+
+    def set_kind(self, v, k):
+        self.journal.append(("kind", v, self.kind[v]))
+        self.kind[v] = k
+
+    def feat(self, a, b):
+        """Feature id of edge a-b (member component id, -1 for a crease) or None."""
+        a, b = (a, b) if a < b else (b, a)
+        key = a * _KEY + b
+        r = self.fover.get(key, _MISSING)
+        if r is not _MISSING:
+            return r
+        i = int(np.searchsorted(self.fkeys, key))
+        if i < len(self.fkeys) and self.fkeys[i] == key:
+            return int(self.fids[i])
+        return None
+
+    def set_feat(self, a, b, val):
+        a, b = (a, b) if a < b else (b, a)
+        key = a * _KEY + b
+        self.journal.append(("feat", key, self.fover.get(key, _MISSING)))
+        self.fover[key] = val
+
+    def set_chain(self, ci, arr):
+        self.journal.append(("chain", ci, self.chains[ci]))
+        self.chains[ci] = arr
+
+    def undo(self, mark):
+        while len(self.journal) > mark:
+            e = self.journal.pop()
+            k = e[0]
+            if k == "over" or k == "feat":
+                d = self.over if k == "over" else self.fover
+                if e[2] is _MISSING:
+                    del d[e[1]]
+                else:
+                    d[e[1]] = e[2]
+            elif k == "kill":
+                self.alive[e[1]] = True
+            elif k == "add":
+                self.m -= 1
+                self.alive[self.m] = False
+            elif k == "P":
+                self.P[e[1]] = e[2]
+            elif k == "addP":
+                self.n -= 1
+                self.kind[self.n] = _DEAD
+                self.chain_of[self.n] = -1
+            elif k == "kind":
+                self.kind[e[1]] = e[2]
+            elif k == "chain":
+                self.chains[e[1]] = e[2]
+
+    # ------------------------------------------------------------ queries
+    def neighbours(self, v):
+        u = np.unique(self.T[self.faces(v)])
+        return u[u != v]
+
+    def oriented(self, a, b):
+        """The two faces of edge a-b as ``((f0, r), (f1, s))``: f0 runs a->b with opposite
+        corner r, f1 runs b->a with opposite corner s; None unless exactly two such faces."""
+        fs = self.faces(a)
+        fs = fs[(self.T[fs] == b).any(1)]
+        if len(fs) != 2:
+            return None
+        out = {}
+        for f in fs.tolist():
+            t = self.T[f]
+            i = int(np.flatnonzero(t == a)[0])
+            if t[(i + 1) % 3] == b:
+                out[0] = (f, int(t[(i + 2) % 3]))
+            else:
+                out[1] = (f, int(t[(i + 1) % 3]))
+        return (out[0], out[1]) if len(out) == 2 else None
+
+    def on_crease(self, q):
+        """Closest points on the input's sharp edges (the lines remeshing kept) and distances."""
+        if self._soup is None:
+            lines = ShellMesh(self.locator.points, self.locator.triangles).sharp_edges()
+            self._soup = (self.locator.points[lines[:, 0]], self.locator.points[lines[:, 1]])
+        a, b = self._soup
+        q = np.atleast_2d(q)
+        if not len(a):
+            return q, np.full(len(q), np.inf)
+        return _closest_on_segments(q, a, b)
+
+    def turned(self, new_tris, old_normals):
+        """True where a new triangle is degenerate or turned more than 45 degrees from the
+        normal of the face it replaces."""
+        nn = _unit_normals(self.P[np.asarray(new_tris)])
+        return np.einsum("ij,ij->i", nn, old_normals) <= self.COS_TURN
+
+    # ------------------------------------------------------------ operations
+    def flip(self, a, b, min_gain):
+        """Flip edge a-b (not a chain/crease edge, faces of one component, dihedral below 35
+        degrees) when that raises the pair's smallest angle by more than ``min_gain``.
+        Returns the new edge's ends (r, s), or False."""
+        if self.feat(a, b) is not None:
+            return False
+        o = self.oriented(a, b)
+        if o is None:
+            return False
+        (f0, r), (f1, s) = o
+        if r == s or self.C[f0] != self.C[f1]:
+            return False
+        tt = np.array([self.T[f0], self.T[f1], [r, s, b], [s, r, a]])
+        X = self.P[tt]
+        ang = _min_angles_small(X)
+        if min(ang[2], ang[3]) <= min(ang[0], ang[1]) + min_gain:
+            return False
+        nn = _unit_normals(X)
+        if nn[0] @ nn[1] < self.COS_FLIP:
+            return False
+        navg = nn[0] + nn[1]
+        navg /= max(np.linalg.norm(navg), 1e-300)
+        if nn[2] @ navg <= self.COS_TURN or nn[3] @ navg <= self.COS_TURN:
+            return False
+        if (self.T[self.faces(r)] == s).any():              # edge r-s exists already
+            return False
+        c0, c1 = self.C[f0], self.C[f1]
+        self.kill(f0)
+        self.kill(f1)
+        self.add(tt[2], c0)
+        self.add(tt[3], c1)
+        return r, s
+
+    def local_flips(self, faces, min_gain=0.01, limit=24):
+        """Angle-improving flips of the edges of ``faces``, spreading to the edges around each
+        flip (a queue; at most ``limit`` flips). Returns the number of flips."""
+        queue = []
+        for f in faces:
+            t = self.T[f].tolist()
+            queue += [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]
+        done, i = 0, 0
+        seen = set()
+        while i < len(queue) and done < limit:
+            a, b = queue[i]
+            i += 1
+            key = (a, b) if a < b else (b, a)
+            if key in seen:
+                continue
+            seen.add(key)
+            o = self.flip(a, b, min_gain)
+            if o:
+                done += 1
+                r, s = o
+                queue += [(a, r), (r, b), (b, s), (s, a)]
+                for e in ((a, r), (r, b), (b, s), (s, a)):
+                    seen.discard(e if e[0] < e[1] else (e[1], e[0]))
+        return done
+
+    def collapse(self, v, u):
+        """Remove vertex v by merging it into its neighbour u (u keeps its position). A free
+        vertex may merge into any neighbour; a chain or crease vertex only along its line."""
+        k = self.kind[v]
+        fid = self.feat(u, v)
+        if k == _FREE:
+            if fid is not None:
+                return False
+        elif k == _CHAIN:
+            if fid is None or fid < 0:
+                return False
+        elif k == _CREASE:
+            if fid != -1:
+                return False
+        else:
+            return False
+        o = self.oriented(u, v)
+        if o is None:
+            return False
+        (fa, r), (fb, s) = o
+        nv = self.neighbours(v)
+        common = np.intersect1d(nv, self.neighbours(u))        # link condition
+        if len(common) != 2 or sorted(common.tolist()) != sorted((r, s)):
+            return False
+        moved = []
+        for w in nv.tolist():
+            if w == u:
+                continue
+            i = self.feat(v, w)
+            if i is not None:
+                if k == _FREE or w in (r, s):
+                    return False
+                moved.append((w, i))
+        if k != _FREE and len(moved) != 1:
+            return False
+        fv = self.faces(v)
+        keep = fv[(fv != fa) & (fv != fb)]
+        new = self.T[keep].copy()
+        new[new == v] = u
+        if self.turned(new, _unit_normals(self.P[self.T[keep]])).any():
+            return False
+        comps = self.C[keep].copy()
+        for f in fv.tolist():
+            self.kill(f)
+        for t, c in zip(new, comps):
+            self.add(t, c)
+        self.set_feat(u, v, None)
+        for w, i in moved:
+            self.set_feat(v, w, None)
+            self.set_feat(u, w, i)
+        if k == _CHAIN:
+            ci = int(self.chain_of[v])
+            arr = self.chains[ci]
+            self.set_chain(ci, arr[arr != v])
+        self.set_kind(v, _DEAD)
+        return True
+
+    def _chain_of_edge(self, a, b, fid):
+        """Index of the chain (of member ``fid``) having a and b as consecutive vertices."""
+        for c in np.flatnonzero(self.chain_member == fid).tolist():
+            arr = self.chains[c]
+            ia, ib = np.flatnonzero(arr == a), np.flatnonzero(arr == b)
+            if len(ia) and len(ib):
+                d = abs(int(ia[0]) - int(ib[0]))
+                if d == 1 or (self.arcs[c].closed and d == len(arr) - 1):
+                    return c
+        return -1
+
+    def split(self, a, b, t):
+        """Split edge a-b near parameter t: the new vertex lies on the input surface, on the
+        exact arc for a chain edge (inserted into the chain), on the input's sharp edge for
+        a crease edge. Both faces of the edge are split in two."""
+        o = self.oriented(a, b)
+        if o is None:
+            return False
+        (f0, r), (f1, s) = o
+        x0 = self.P[a] + t * (self.P[b] - self.P[a])
+        fid = self.feat(a, b)
+        ci = -1
+        if fid is None:
+            x, kind = self.locator.closest(x0)[0][0], _FREE
+        elif fid >= 0:
+            ci = self._chain_of_edge(a, b, fid)
+            if ci < 0:
+                return False
+            x, kind = closest_on_polyline(x0, self.arcs[ci].points, self.arcs[ci].closed)[0], _CHAIN
+        else:
+            xs, d = self.on_crease(np.vstack([x0, self.P[a], self.P[b]]))
+            if d[1] > self.eps or d[2] > self.eps or d[0] > 0.25 * np.linalg.norm(self.P[b] - self.P[a]):
+                return False
+            x, kind = xs[0], _CREASE
+        nn = _unit_normals(self.P[self.T[[f0, f1]]])
+        self._grow()
+        n = self.n
+        self.P[n] = x                      # scratch slot for the check; add_point writes it again
+        new = np.array([[a, n, r], [n, b, r], [b, n, s], [n, a, s]])
+        if self.turned(new, nn[[0, 0, 1, 1]]).any():
+            return False
+        n = self.add_point(x, kind, ci)
+        c0, c1 = self.C[f0], self.C[f1]
+        self.kill(f0)
+        self.kill(f1)
+        for tri, c in zip(new, (c0, c0, c1, c1)):
+            self.add(tri, c)
+        if fid is not None:
+            self.set_feat(a, b, None)
+            self.set_feat(a, n, fid)
+            self.set_feat(n, b, fid)
+        if ci >= 0:
+            arr = self.chains[ci]
+            ia, ib = int(np.flatnonzero(arr == a)[0]), int(np.flatnonzero(arr == b)[0])
+            self.set_chain(ci, np.insert(arr, max(ia, ib) if abs(ia - ib) == 1 else len(arr), n))
+        return True
+
+    def _candidates(self, v):
+        """Candidate positions of vertex v: on the input surface around it (free), along its
+        exact arc towards its chain neighbours (chain), along the input's sharp edge towards
+        its line neighbours (crease)."""
+        k = self.kind[v]
+        x = self.P[v]
+        nb = self.neighbours(v)
+        if k == _FREE:
+            L = float(np.mean(np.linalg.norm(self.P[nb] - x, axis=1)))
+            tri = self.T[self.faces(v)]
+            nrm = np.cross(self.P[tri[:, 1]] - self.P[tri[:, 0]], self.P[tri[:, 2]] - self.P[tri[:, 0]]).sum(0)
+            nrm /= max(np.linalg.norm(nrm), 1e-300)
+            e1 = np.cross(nrm, [1.0, 0.0, 0.0])
+            if np.linalg.norm(e1) < 0.5:
+                e1 = np.cross(nrm, [0.0, 1.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(nrm, e1)
+            th = np.radians(np.arange(0.0, 360.0, 30.0))
+            dirs = np.cos(th)[:, None] * e1 + np.sin(th)[:, None] * e2
+            r = L * np.array([0.4, 0.2, 0.1, 0.05, 0.02])
+            cen = self.P[nb].mean(0)
+            q = np.vstack([x + (r[:, None, None] * dirs[None]).reshape(-1, 3), cen, 0.5 * (x + cen)])
+            return self.locator.closest(q)[0]
+        if k == _CHAIN:
+            ci = int(self.chain_of[v])
+            arr = self.chains[ci]
+            i = int(np.flatnonzero(arr == v)[0])
+            arc = self.arcs[ci]
+            if not arc.closed and (i == 0 or i == len(arr) - 1):
+                return np.zeros((0, 3))
+            nbs = [arr[(i - 1) % len(arr)], arr[(i + 1) % len(arr)]]
+            pts = np.vstack([arc.points, arc.points[:1]]) if arc.closed else arc.points
+            cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+            s = _polyline_param(np.vstack([x, self.P[nbs]]), pts, cum)
+            d = s[1:] - s[0]
+            if arc.closed:
+                d = np.where(np.abs(d) > 0.5 * cum[-1], d - np.sign(d) * cum[-1], d)
+            sp = s[0] + (np.array([0.05, 0.1, 0.2, 0.3, 0.4, 0.5])[None] * d[:, None]).ravel()
+            sp = np.mod(sp, cum[-1]) if arc.closed else np.clip(sp, 0.0, cum[-1])
+            return np.stack([np.interp(sp, cum, pts[:, j]) for j in range(3)], 1)
+        if k == _CREASE:
+            ws = [w for w in nb.tolist() if self.feat(v, w) == -1]
+            if len(ws) != 2 or self.on_crease(x)[1][0] > self.eps:
+                return np.zeros((0, 3))
+            a = np.array([0.05, 0.1, 0.2, 0.3, 0.4, 0.5])
+            q = np.vstack([x + a[:, None] * (self.P[w] - x) for w in ws])
+            xs, d = self.on_crease(q)
+            return xs[d <= 0.1 * np.linalg.norm(q - x, axis=1) + self.eps]
+        return np.zeros((0, 3))
+
+    def move(self, v, iters=4):
+        """Hill-climb vertex v over its candidate positions to raise its star's smallest
+        angle (no face turning more than 45 degrees from where it started)."""
+        if self.kind[v] not in (_FREE, _CHAIN, _CREASE):
+            return False
+        tri = self.T[self.faces(v)]
+        if not len(tri):
+            return False
+        n0 = _unit_normals(self.P[tri])
+        which = (tri == v)[None, :, :, None]
+        moved = False
+        for _ in range(iters):
+            X = self.P[tri]
+            cur = _min_angles_small(X).min()
+            q = self._candidates(v)
+            if not len(q):
+                break
+            Xc = np.where(which, q[:, None, None, :], X[None]).reshape(-1, 3, 3)   # (k * f, 3, 3)
+            ang = _min_angles_small(Xc).reshape(len(q), len(tri))
+            turn = np.einsum("kfi,fi->kf", _unit_normals(Xc).reshape(len(q), len(tri), 3), n0) <= self.COS_TURN
+            score = np.where(turn.any(1), -1.0, ang.min(1))
+            j = int(np.argmax(score))
+            if score[j] <= cur + 1e-6:
+                break
+            self.set_point(v, q[j])
+            moved = True
+        return moved
+
+    # ------------------------------------------------------------ driver
+    def _ring_faces(self, verts):
+        fs = np.unique(np.concatenate([self.faces(v) for v in verts]))
+        return np.unique(np.concatenate([self.faces(int(v)) for v in np.unique(self.T[fs])]))
+
+    @staticmethod
+    def _better(a, b, cap):
+        """Lexicographic comparison of the sorted (capped) smallest angles: is a better than b?"""
+        k = max(len(a), len(b))
+        a = np.concatenate([np.sort(a), np.full(k - len(a), cap)])
+        b = np.concatenate([np.sort(b), np.full(k - len(b), cap)])
+        d = np.flatnonzero(np.abs(a - b) > 1e-7)
+        return bool(len(d)) and bool(a[d[0]] > b[d[0]])
+
+    def _apply(self, cand):
+        op = cand[0]
+        if op == "flip":
+            return True                     # the local flips that follow every candidate
+        if op == "collapse":
+            return self.collapse(cand[1], cand[2])
+        if op == "split":
+            return self.split(cand[1], cand[2], cand[3])
+        return self.move(cand[1])
+
+    def _trial(self, cand, f):
+        m0 = self.m
+        if not self._apply(cand):
+            return False
+        self.local_flips(list(range(m0, self.m)) + ([f] if self.alive[f] else []))
+        return True
+
+    def repair_face(self, f, cap):
+        """Try every candidate operation on face f (collapse of each short edge either way,
+        split of the longest edge at the foot of the opposite corner and at its midpoint,
+        relocation of each corner; each followed by local flips); keep the one that best
+        improves the sorted smallest angles of the faces around f. Returns whether one was
+        kept."""
+        t = self.T[f].tolist()
+        R0 = self._ring_faces(t)
+        q_old = np.minimum(_min_angles_small(self.P[self.T[R0]]), cap)
+        X = self.P[t]
+        L = np.linalg.norm(X[[1, 2, 0]] - X, axis=1)          # edge i joins corners i, i+1
+        cands = [("flip",)]
+        for i in range(3):
+            a, b = t[i], t[(i + 1) % 3]
+            if L[i] <= 0.6 * L.max():                        # short edge: collapse either way
+                cands += [("collapse", a, b), ("collapse", b, a)]
+        i = int(np.argmax(L))                                # longest edge: split
+        a, b = t[i], t[(i + 1) % 3]
+        ab = X[(i + 1) % 3] - X[i]
+        foot = float(np.clip((X[(i + 2) % 3] - X[i]) @ ab / max(ab @ ab, 1e-300), 0.15, 0.85))
+        cands.append(("split", a, b, foot))
+        if abs(foot - 0.5) > 0.1:
+            cands.append(("split", a, b, 0.5))
+        cands += [("move", v) for v in t if self.kind[v] in (_FREE, _CHAIN, _CREASE)]
+        best, best_q = None, None
+        region = set(R0.tolist())
+        for cand in cands:
+            mark = len(self.journal)
+            m0 = self.m
+            self.region, self.killed_out = region, []
+            if self._trial(cand, f):
+                new_f = np.concatenate([R0, np.arange(m0, self.m)])
+                q_new = np.minimum(_min_angles_small(self.P[self.T[new_f[self.alive[new_f]]]]), cap)
+                old = np.concatenate([q_old, np.minimum(self.killed_out, cap)])
+                if self._better(q_new, old, cap) and (best is None or self._better(q_new, best_q, cap)):
+                    best, best_q = cand, q_new
+            self.region = None
+            self.undo(mark)
+        if best is None:
+            return False
+        self._trial(best, f)
+        self.applied[best[0]] += 1
+        return True
+
+    def bad_faces(self, target):
+        """Live faces with an angle below ``target``, worst first."""
+        f = np.flatnonzero(self.alive[:self.m])
+        a = _min_angles_small(self.P[self.T[f]])
+        o = np.argsort(a, kind="stable")
+        return f[o[a[o] < target]]
+
+    def export(self):
+        """Compacted ``(P, T, C, feature_edges, feature_ids, chains, old_to_new)``: dead faces
+        dropped, unreferenced vertices removed (old_to_new -1), surviving order kept."""
+        alive = np.flatnonzero(self.alive[:self.m])
+        T = self.T[alive]
+        used = np.zeros(self.n, bool)
+        used[T.ravel()] = True
+        remap = np.full(self.n, -1, np.int64)
+        remap[used] = np.arange(int(used.sum()))
+        okeys = np.array(sorted(self.fover), np.int64)
+        base = ~np.isin(self.fkeys, okeys)
+        ov = [(k, self.fover[k]) for k in okeys.tolist() if self.fover[k] is not None]
+        keys = np.concatenate([self.fkeys[base], np.array([k for k, _ in ov], np.int64)])
+        ids = np.concatenate([self.fids[base], np.array([i for _, i in ov], np.int64)]).astype(np.int32)
+        fe = remap[np.stack([keys // _KEY, keys % _KEY], 1)]
+        return (self.P[:self.n][used], remap[T], self.C[alive], fe, ids, [remap[c] for c in self.chains], remap)

@@ -30,8 +30,10 @@ by sliding chain vertices along their exact curves, and chain edges much longer 
 member is tall are split (with the two skin triangles on them). Each planar member is then
 one constrained Delaunay triangulation of its plane's 2D frame (``triangle``, no Steiner
 point on any chain or junction segment), refined to a size graded from the boundary spacing
-to ``size``, smoothed and pruned for its smallest angle; a non-planar member is meshed in
-the parameter square of a Coons patch of B-spline fits of its four sides.
+to ``size``, smoothed and pruned for its smallest angle. A kinked explicit member (one chain
+piece per polyline segment on both sides, not coplanar) is split into panels by the straight
+lines joining its upper and lower kinks, each meshed in its own plane; any other non-planar
+member is meshed in the parameter square of a Coons patch of B-spline fits of its four sides.
 
 See ``docs/members.md`` for the method, the numbering of the new nodes and the error
 messages.
@@ -51,7 +53,7 @@ from .mesh import ShellMesh, vertex_faces
 from .section import Plane
 
 __all__ = ["MemberInfo", "member_infos", "build_members", "member_statistics", "triangulate_planar",
-           "coons_patch", "DEFAULT_MIN_ANGLE"]
+           "coons_patch", "explicit_plane", "DEFAULT_MIN_ANGLE"]
 
 #: Minimum angle (degrees) requested from the constrained Delaunay refinement (``q``).
 DEFAULT_MIN_ANGLE = 30.0
@@ -112,8 +114,10 @@ class MemberInfo:
     @classmethod
     def from_spec(cls, spec) -> "MemberInfo":
         """From a :class:`~shellmesh_mdao.layout.MemberSpec` (or anything with its attributes).
-        An explicit member gets no plane here (:func:`build_members` fits one to its imprinted
-        chains when they are coplanar) and runs along its ``upper`` polyline."""
+        An explicit member runs along its ``upper`` polyline; it gets the plane its layout spans
+        when its polylines and projection directions lie in one plane (:func:`explicit_plane`),
+        else none here (:func:`build_members` fits one to its imprinted chains when they are
+        coplanar, as for closest-point projection, or meshes it panel by panel)."""
         kind = getattr(spec, "kind", "explicit")
         pp, pn = getattr(spec, "plane_point", None), getattr(spec, "plane_normal", None)
         direction = None
@@ -123,8 +127,37 @@ class MemberInfo:
         if kind == "explicit" and getattr(spec, "upper", None) is not None:
             up_pts = np.asarray(spec.upper, float).reshape(-1, 3)
             direction = up_pts[-1] - up_pts[0]
+            if pn is None:
+                pp, pn = explicit_plane(spec)
         return cls(name=spec.name, kind=kind, plane_point=pp, plane_normal=pn, up=getattr(spec, "up", None),
                    direction=direction, wing=getattr(spec, "wing", None), index=int(getattr(spec, "index", 0) or 0))
+
+
+def explicit_plane(spec, tol: float = 1e-9):
+    """The plane of a planar explicit member from its layout: ``(point, unit normal)`` when its
+    ``upper`` and ``lower`` polylines and both projection directions lie in one plane (within
+    ``tol`` times the polylines' extent), else ``(None, None)`` (a kinked or twisted member, or
+    closest-point projection, whose projection directions are not known before projecting)."""
+    d_up = getattr(spec, "direction", None)
+    if d_up is None:
+        return None, None
+    up_pts = np.asarray(spec.upper, float).reshape(-1, 3)
+    lo_pts = np.asarray(spec.lower, float).reshape(-1, 3)
+    d_lo = getattr(spec, "lower_direction", None)
+    dirs = np.asarray([d_up] + ([] if d_lo is None else [d_lo]), float)
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    pts = np.vstack([up_pts, lo_pts])
+    ext = float(np.linalg.norm(np.ptp(pts, axis=0)))
+    seg = np.diff(up_pts, axis=0)
+    k = int(np.argmax(np.linalg.norm(seg, axis=1)))
+    n = np.cross(seg[k], dirs[0])
+    ln = float(np.linalg.norm(n))
+    if ext == 0 or ln <= 1e-12 * float(np.linalg.norm(seg[k])):
+        return None, None
+    n = n / ln
+    if np.abs((pts - up_pts[0]) @ n).max() > tol * ext or np.abs(dirs @ n).max() > tol:
+        return None, None
+    return up_pts[0].copy(), n
 
 
 def _fit_plane(pts: np.ndarray, tol: float):
@@ -449,6 +482,8 @@ class _Member:
     end_lines: list = field(default_factory=list)                 # node arrays of its own end lines
     sides: list = field(default_factory=list)        # two open chains (upper/lower, or a loop's halves)
     side_arcs: list = field(default_factory=list)    # their exact curves (open polylines or None)
+    joints: list = field(default_factory=list)       # non-planar explicit member: (upper, lower) kink vertices
+    kink_lines: list = field(default_factory=list)   # node arrays of the lines joining the kink vertices
 
     @property
     def name(self) -> str:
@@ -671,15 +706,16 @@ def _gather(skin: ShellMesh, chains, infos, tol: float) -> list:
                 raise ImprintError(f"member '{info.name}' has chains {sorted(g)}; it needs an 'upper' and a 'lower' "
                                    "chain (or one closed 'loop' chain): imprint both skin sides")
             mem = _Member(info)
-            sides, arcs = [], []
+            sides, arcs, joints = [], [], []
             for side in ("upper", "lower"):
                 pcs = [g[side][k] for k in sorted(g[side])]
-                ch = _join_pieces([_complete_chain(skin, c.vertices, False, info.name, c.side) for c in pcs],
-                                  info.name, side)
+                piece_ch = [_complete_chain(skin, c.vertices, False, info.name, c.side) for c in pcs]
+                ch = _join_pieces(piece_ch, info.name, side)
                 arc = pcs[0].arc if len(pcs) == 1 else _join_arcs([c.arc for c in pcs])
                 _check_chain_order(skin, ch, arc, info.name, side)
                 sides.append(ch)
                 arcs.append(arc)
+                joints.append([_shared_end(a, b) for a, b in zip(piece_ch[:-1], piece_ch[1:])])
             mem.upper, mem.lower = sides
             mem.arcs = tuple(arcs)
         if not info.is_planar:
@@ -687,8 +723,20 @@ def _gather(skin: ShellMesh, chains, infos, tol: float) -> list:
                 float(np.linalg.norm(np.ptp(skin.points[mem.chain_vertices()], axis=0))), 1e-300))
             if pn is not None:
                 mem.info = replace(info, plane_point=pp, plane_normal=pn)
+            elif mem.loop is None and len(joints[0]) == len(joints[1]) and len(joints[0]):
+                # a kinked explicit member (one chain piece per polyline segment on both sides):
+                # meshed as panels between the lines joining its kink vertices
+                mem.joints = list(zip(joints[0], joints[1]))
         mems.append(mem)
     return mems
+
+
+def _shared_end(a: np.ndarray, b: np.ndarray) -> int:
+    """The end vertex two consecutive chain pieces share (they were joined on it)."""
+    for x in (a[0], a[-1]):
+        if x in (b[0], b[-1]):
+            return int(x)
+    raise ImprintError("internal error: consecutive chain pieces share no end vertex; report this")
 
 
 def _orient(mems, P):
@@ -727,6 +775,11 @@ def _find_junctions(mems, P, diag) -> list:
     out = []
     for (i, j), vs in sorted(shared.items()):
         mi, mj = mems[i], mems[j]
+        if len(vs) == 1:
+            raise ImprintError(f"members '{mi.name}' and '{mj.name}' meet on one skin side only, at "
+                               f"{np.round(P[vs], 6).tolist()}: they cross each other inside the skin and the end "
+                               "line of one passes through the other; move or extend one so that they cross on both "
+                               "skin sides (or not at all), or use a smaller --size")
         if len(vs) != 2:
             raise ImprintError(f"members '{mi.name}' and '{mj.name}' meet at {len(vs)} skin point(s) "
                                f"{np.round(P[vs], 6).tolist()}; two members must meet at exactly two (one on each "
@@ -934,7 +987,7 @@ def _sub_polyline(p: np.ndarray, cum: np.ndarray, s0: float, s1: float) -> np.nd
 
 
 def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: float = 0.67, rounds: int = 20,
-                  min_skin_angle: float = 10.0) -> int:
+                  min_skin_angle: float = 10.0, pinned=None) -> int:
     """Even out uneven chain spacing by sliding chain vertices along their exact arcs.
 
     ``chains_arcs``: (open chain, its exact curve as an open polyline) pairs. A chain vertex
@@ -942,8 +995,8 @@ def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: floa
     two chain edges differ by more than ``1/ratio`` moves half-way towards the arc-length
     midpoint of its neighbours. The point stays on the exact curve (input surface and member
     plane); moves that would fold a skin triangle or drop its smallest angle below
-    ``min(current, min_skin_angle)`` are refused. Updates ``P`` in place; returns the number
-    of vertices moved."""
+    ``min(current, min_skin_angle)`` are refused; ``pinned`` (vertex ids) never move (the kinks
+    of a kinked member). Updates ``P`` in place; returns the number of vertices moved."""
     F = skin.faces[:, :3]
     n = len(P)
     count = np.zeros(n, np.int64)
@@ -951,6 +1004,8 @@ def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: floa
         np.add.at(count, np.unique(m.chain_vertices()), 1)
     geo = np.zeros(n, bool)
     geo[skin.feature_edges[skin.feature_edge_ids < 0].ravel()] = True
+    if pinned is not None and len(pinned):
+        geo[np.asarray(pinned, np.int64)] = True
     # per chain: parameters along its arc, ordered; collect movable interior vertices
     recs = []
     for ch, poly in chains_arcs:                     # loop over chains
@@ -1314,7 +1369,8 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
     Raises :class:`ImprintError` when a member's chains do not close into panels (a missing or
     inconsistent crossing, a chain that doubles back), :class:`LayoutError` for coplanar
     members that overlap, members that cross inside the skin without meeting on it, or a
-    junction inside a non-planar member, and :class:`SizeError` for a bad ``size``.
+    junction inside a non-planar member (a Coons patch; a kinked member takes junctions inside
+    its planar panels), and :class:`SizeError` for a bad ``size``.
     """
     if size is None or not np.isfinite(size) or size <= 0:
         raise SizeError(f"member element size must be a positive length, got {size}; pass the skin's target edge "
@@ -1344,14 +1400,15 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
     _classify(mems, junctions)
     for J in junctions:
         for k in (J.i, J.j):
-            if not mems[k].info.is_planar and J.where[k] == "interior":
+            if not mems[k].info.is_planar and not mems[k].joints and J.where[k] == "interior":
                 raise LayoutError(f"members '{mems[J.i].name}' and '{mems[J.j].name}' meet inside the non-planar "
                                   f"member '{mems[k].name}'; junction lines inside a non-planar member are not "
                                   "supported: split it into planar members")
     for m in mems:
         m.make_sides(P)
     if relax_chains:
-        _relax_chains(skin, P, mems, [(c, a) for m in mems for c, a in zip(m.sides, m.side_arcs)])
+        _relax_chains(skin, P, mems, [(c, a) for m in mems for c, a in zip(m.sides, m.side_arcs)],
+                      pinned=[v for m in mems for pair in m.joints for v in pair])
     F, C = skin.faces[:, :3].copy(), skin.component.copy()
     FE, FID = skin.feature_edges.copy(), skin.feature_edge_ids.copy()
     n_skin0 = len(P)
@@ -1382,6 +1439,12 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
         for e, (a, b) in enumerate(((m.upper[0], m.lower[0]), (m.upper[-1], m.lower[-1]))):
             if m.closing[e] is None and a != b:
                 m.end_lines[e] = add_line(a, b, _chain_edge_len(P, m.upper, a), _chain_edge_len(P, m.lower, b))
+    for m in mems:                                    # kink lines of kinked (non-planar) explicit members
+        m.kink_lines = []
+        for a, b in m.joints:
+            same = [J.nodes for J in junctions if {J.vu, J.vl} == {a, b}]
+            m.kink_lines.append(same[0] if same else
+                                add_line(a, b, _chain_edge_len(P, m.upper, a), _chain_edge_len(P, m.lower, b)))
     P = np.vstack([P] + new_pts)
     # ---------------------------------------------------------------- checks between members
     polys = [m.loop if m.loop is not None else _outline_nodes(m, junctions) for m in mems]
@@ -1401,22 +1464,10 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
     for k, m in enumerate(mems):
         inner_lines = [junctions[jx].nodes for jx in m.interior]
         if m.info.is_planar:
-            if m.loop is not None:
-                bnd = [np.append(m.loop, m.loop[0])]
-            else:
-                bnd = [np.append(polys[k], polys[k][0])]
-            lines = bnd + inner_lines
-            nodes = np.unique(np.concatenate(lines))
-            remap = np.full(int(nodes.max()) + 1, -1, np.int64)
-            remap[nodes] = np.arange(len(nodes))
-            seg = np.vstack([np.stack([remap[ln[:-1]], remap[ln[1:]]], 1) for ln in lines])
-            e1, e2, origin = _plane_frame(m, P, nodes)
-            uv = _to2d(P[nodes], e1, e2, origin)
-            uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'")
-            st = uv_all[len(nodes):]
-            newp = origin + st[:, :1] * e1 + st[:, 1:] * e2
-            gid = np.concatenate([nodes, n_total + np.arange(len(st))])
-            gtris = gid[tris]
+            newp, gtris = _mesh_planar_region(m, P, m.loop if m.loop is not None else polys[k], inner_lines, size,
+                                              min_angle, n_total)
+        elif m.joints:
+            newp, gtris = _mesh_panels(m, P, junctions, size, min_angle, n_total, tol)
         else:
             newp, gtris = _mesh_coons(m, P, junctions, size, min_angle, n_total)
         pts_parts.append(newp)
@@ -1437,7 +1488,7 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
         fid.append(np.full(len(ln) - 1, cid(mems[owner].name), np.int32))
         fixed.append(ln)
     for m in mems:
-        for ln in m.end_lines:
+        for ln in list(m.end_lines) + [k for k in m.kink_lines if not any(k is J.nodes for J in junctions)]:
             if ln is not None:
                 fe.append(np.stack([ln[:-1], ln[1:]], 1))
                 fid.append(np.full(len(ln) - 1, cid(m.name), np.int32))
@@ -1464,6 +1515,85 @@ def _piece_names(m: _Member, gtris, inner_lines, points, n_nodes, split: bool):
     rank = np.empty(npc, np.int64)
     rank[np.argsort(key, kind="stable")] = np.arange(npc)
     return [f"{m.name}/seg_{r}" for r in range(npc)], rank[lab]
+
+
+def _mesh_planar_region(m: _Member, P, outline, inner_lines, size, min_angle, n_total):
+    """Triangulate the planar region of ``m`` (its plane in ``m.info``) bounded by the closed node
+    loop ``outline`` with the interior node lines ``inner_lines``; returns the new interior
+    points (numbered from ``n_total``, exactly on the plane) and the triangles (global ids)."""
+    lines = [np.append(outline, outline[0])] + list(inner_lines)
+    nodes = np.unique(np.concatenate(lines))
+    remap = np.full(int(nodes.max()) + 1, -1, np.int64)
+    remap[nodes] = np.arange(len(nodes))
+    seg = np.vstack([np.stack([remap[ln[:-1]], remap[ln[1:]]], 1) for ln in lines])
+    e1, e2, origin = _plane_frame(m, P, nodes)
+    uv = _to2d(P[nodes], e1, e2, origin)
+    uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'")
+    st = uv_all[len(nodes):]
+    newp = origin + st[:, :1] * e1 + st[:, 1:] * e2
+    gid = np.concatenate([nodes, n_total + np.arange(len(st))])
+    return newp, gid[tris]
+
+
+def _mesh_panels(m: _Member, P, junctions, size, min_angle, n_total, tol):
+    """Mesh a kinked explicit member panel by panel: panel ``p`` lies between kink line ``p - 1``
+    and kink line ``p`` (the member's own ends at the first and last panel) and is bounded by
+    the pieces of the upper and lower chain between them. A panel whose nodes are coplanar
+    (within ``tol`` of the diagonal) is meshed in its plane (new nodes exactly on it), any
+    other through the Coons patch of its four sides. Interior junction lines must lie inside
+    a planar panel. Returns the new interior points (from ``n_total``) and the triangles."""
+    U, L = m.upper, m.lower
+    ku = [int(np.flatnonzero(U == a)[0]) for a, _ in m.joints]
+    kl = [int(np.flatnonzero(L == b)[0]) for _, b in m.joints]
+    ou, ol = np.argsort(ku, kind="stable"), np.argsort(kl, kind="stable")
+    if not np.array_equal(ou, ol):
+        raise ImprintError(f"member '{m.name}': the lines joining the kinks of its upper and lower curves cross each "
+                           "other; give its upper and lower polylines the same number of points, in the same order")
+    ku = [0] + [ku[i] for i in ou] + [len(U) - 1]
+    kl = [0] + [kl[i] for i in ou] + [len(L) - 1]
+    if (np.diff(ku) <= 0).any() or (np.diff(kl) <= 0).any():
+        raise ImprintError(f"member '{m.name}': a kink of its upper or lower curve falls on the curve's end; remove "
+                           "the repeated polyline point")
+    ends = [junctions[m.closing[e]].nodes if m.closing[e] is not None else m.end_lines[e] for e in (0, 1)]
+    sides = [ends[0]] + [m.kink_lines[i] for i in ou] + [ends[1]]
+    diag = float(np.linalg.norm(np.ptp(P, axis=0)))
+    inner = [junctions[jx] for jx in m.interior]
+    pos_u = [int(np.flatnonzero((U == J.vu) | (U == J.vl))[0]) for J in inner]
+    pts, tris = [], []
+    for p in range(len(ku) - 1):                       # loop over the panels
+        Up, Lp = U[ku[p]:ku[p + 1] + 1], L[kl[p]:kl[p + 1] + 1]
+        sd = []
+        for q, (a, b) in ((p, (Up[0], Lp[0])), (p + 1, (Up[-1], Lp[-1]))):
+            ln = sides[q]
+            if ln is None:
+                ln = np.zeros(0, np.int64) if a == b else np.array([a, b], np.int64)
+            elif len(ln) and ln[0] != b:
+                ln = ln[::-1]                          # from the lower corner to the upper corner
+            sd.append(ln)
+        outline = np.concatenate([Up, sd[1][::-1][1:-1], Lp[::-1], sd[0][1:-1]])
+        outline = outline[outline != np.roll(outline, 1)]
+        lines_in = [inner[i].nodes for i in range(len(inner)) if ku[p] < pos_u[i] < ku[p + 1]]
+        ext = float(np.linalg.norm(np.ptp(P[outline], axis=0)))
+        pp, pn = _fit_plane(P[outline], tol * diag / max(ext, 1e-300))
+        panel = _Member(replace(m.info, plane_point=pp, plane_normal=pn), upper=Up, lower=Lp)
+        if pn is not None:
+            newp, t = _mesh_planar_region(panel, P, outline, lines_in, size, min_angle, n_total)
+        else:
+            if lines_in:
+                raise LayoutError(f"a member meets the non-planar panel {p} of member '{m.name}' inside it; junction "
+                                  "lines inside a non-planar panel are not supported: give the member a polyline "
+                                  "point at the junction, or make the panel planar")
+            panel.closing, panel.end_lines = [None, None], [sd[0] if len(sd[0]) else None,
+                                                            sd[1] if len(sd[1]) else None]
+            newp, t = _mesh_coons(panel, P, junctions, size, min_angle, n_total)
+        # one orientation for all panels: the upper chain is traversed forward (Up[0] -> Up[1])
+        fwd = (t == Up[0]) & (np.roll(t, -1, axis=1) == Up[1])
+        if not fwd.any():
+            t = t[:, ::-1]
+        pts.append(newp)
+        tris.append(t)
+        n_total += len(newp)
+    return np.vstack(pts), np.vstack(tris)
 
 
 def _mesh_coons(m: _Member, P, junctions, size, min_angle, n_total):

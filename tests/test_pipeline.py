@@ -41,25 +41,33 @@ def run_small(spars):
     return _CACHE[key]
 
 
-def is_member(mesh):
-    """Per face: True for member faces (components named after a rib, spar or explicit member)."""
-    names = np.array([("/rib_" in c or "/spar_" in c) for c in mesh.component_names])
+def is_member(mesh, infos):
+    """Per face: True for member faces (components named after a member, or its /seg_<j> pieces)."""
+    members = {m.name for m in infos}
+    names = np.array([c.split("/seg_")[0] in members for c in mesh.component_names])
     return names[mesh.component]
 
 
-def check_guarantees(res, input_closed=True):
-    """The properties every final mesh must have; returns the element-quality arrays."""
+def check_guarantees(res, input_closed=True, min_sj=0.2, free_edges=False, max_fixed=0.05):
+    """The properties every final mesh must have; returns the element-quality arrays.
+    ``min_sj``: every element's scaled Jacobian is above it (0.2 for layouts whose member
+    curves cross at reasonable angles; two curves crossing at an angle a leave a corner of a).
+    ``free_edges``: members may have free edges (an explicit member's straight end line inside
+    the wing, attached to nothing)."""
     q = res.mesh
     assert res.stage == "quad"
     assert q.n_faces > 0 and q.n_tris == 0, "the final mesh is all quads"
     eq = element_quality(q.points, q.faces)
     sj = eq["scaled_jacobian"]
-    assert sj.min() > 0.2, f"{int((sj <= 0.2).sum())} elements with scaled Jacobian <= 0.2 (min {sj.min():.3f})"
+    assert sj.min() > min_sj, f"{int((sj <= min_sj).sum())} elements with scaled Jacobian <= {min_sj} (min {sj.min():.3f})"
+    poor = np.flatnonzero(sj <= 0.2)
+    assert res.report["poor_elements"]["count"] == len(poor), "every element at or below 0.2 is reported"
+    assert res.report["poor_elements"]["elements"] == poor[:100].tolist()
     chk = q.check()
     assert len(chk.duplicate_points) == 0, "duplicate points (within 1e-9 of the diagonal)"
     assert len(chk.hanging_nodes) == 0, "hanging nodes"
     assert len(chk.degenerate_faces) == 0 and len(chk.unreferenced_points) == 0
-    mem = is_member(q)
+    mem = is_member(q, res.state.infos)
     skin = q.submesh(~mem)
     if input_closed:
         assert len(skin.boundary_edges()) == 0, "the skin is closed where the input was"
@@ -69,15 +77,19 @@ def check_guarantees(res, input_closed=True):
     eid = topo.edge_ids(fe)
     assert (eid >= 0).all(), "every member feature edge is a mesh edge"
     val = topo.valence[eid]
-    assert set(np.unique(val).tolist()) <= {2, 3, 4}
-    assert len(q.boundary_edges()) == 0, "no free member edge: each member boundary is a junction"
+    assert set(np.unique(val).tolist()) <= ({1, 2, 3, 4} if free_edges else {2, 3, 4})
+    if not free_edges:
+        assert len(q.boundary_edges()) == 0, "no free member edge: each member boundary is a junction"
     # every node on its support
     sup = res.state.supports
     tol = 1e-6 * q.diagonal
     d = sup.distance(q.points)
     assert d[sup.kind == PLANE].max(initial=0) <= 1e-9 * q.diagonal
-    assert np.percentile(d[sup.kind == SURFACE], 99.9) <= tol
-    assert (sup.kind == FIXED).sum() < 0.05 * q.n_points
+    # skin nodes lie on the input; the subdivision's fold guard may leave a few new nodes at
+    # their linear position where a parent face spans a crease tighter than the element size
+    ds = d[sup.kind == SURFACE]
+    assert (ds <= tol).mean() >= 0.995 and ds.max() <= 5e-3 * q.diagonal
+    assert (sup.kind == FIXED).sum() < max_fixed * q.n_points
     return eq
 
 
@@ -154,3 +166,20 @@ def test_corpus_all_quad(geometry_dir, manifest, name):
     check_guarantees(res)
     again = pl.run_pipeline(path, lay, CORPUS_SIZES[name], progress=False).mesh
     assert np.array_equal(res.mesh.points, again.points) and np.array_equal(res.mesh.faces, again.faces)
+
+
+@pytest.mark.slow
+def test_explicit_members_to_all_quads():
+    """The default wing with planar and kinked explicit members (T- and X-junctions with the
+    generated ribs and spars) through every stage: the same guarantees, except that where two
+    member curves cross at a shallow angle (here about 9 degrees, a wedge no mesh can avoid)
+    an element may fall to the crossing angle: it is never folded, and it is reported."""
+    from test_explicit_members import WING_SIZE, wing_with_explicit_members
+
+    surface = naca_wing()
+    res = pl.run_pipeline(surface, wing_with_explicit_members(surface), WING_SIZE, progress=False)
+    eq = check_guarantees(res, min_sj=0.1, free_edges=True, max_fixed=0.15)   # non-planar members are fixed
+    assert (eq["scaled_jacobian"] <= 0.2).sum() <= 5
+    names = {res.mesh.component_names[i].split("/seg_")[0] for i in np.unique(res.mesh.component)}
+    explicit = {m.name for m in res.layout.members() if m.kind == "explicit"}
+    assert explicit and explicit <= names
