@@ -1,5 +1,6 @@
 # The two set-up commands of the README. Each installs what it needs, then runs.
-#   make demo   - install the package and run the main job on the bundled default wing
+#   make demo   - install the package and run the main job on the bundled default wing (mesh, pictures,
+#                 report; then the CalculiX wing-box analysis through OpenMDAO)
 #   make test   - install the package with its test extras and run the test suite
 PYTHON ?= python3
 DEMO_DIR ?= demo_out
@@ -7,12 +8,13 @@ PYTEST_ARGS ?=
 
 .PHONY: install install-test install-system demo test test-fast
 
-# System packages (Debian): the CalculiX solver (ccx) for the structural analysis, and EGL with
-# Mesa's software renderer for off-screen pictures (pyvista/VTK). Installed only when missing.
-SYSTEM_PACKAGES = calculix-ccx libegl1 libgl1-mesa-dri
+# System packages (Debian): the CalculiX solver (ccx) for the structural analysis, EGL with
+# Mesa's software renderer for off-screen pictures (pyvista/VTK), and Open MPI for parallel DOE
+# studies (mpi4py builds against it). Installed only when missing.
+SYSTEM_PACKAGES = calculix-ccx libegl1 libgl1-mesa-dri openmpi-bin libopenmpi-dev
 install-system:
 	@if ! command -v ccx >/dev/null 2>&1 || ! ldconfig -p | grep -q 'libEGL.so.1' \
-	    || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1; then \
+	    || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || ! command -v mpirun >/dev/null 2>&1; then \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(SYSTEM_PACKAGES) >/dev/null; fi
 
 install: install-system
@@ -23,6 +25,7 @@ install-test: install-system
 
 demo: install
 	$(PYTHON) -m shellmesh_mdao.cli demo --out-dir $(DEMO_DIR)
+	$(PYTHON) run_scripts/wingbox_analysis.py --out-dir $(DEMO_DIR)/wingbox_analysis
 
 test: install-test
 	$(PYTHON) -m pytest $(PYTEST_ARGS)

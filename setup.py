@@ -28,9 +28,12 @@ setup(
         "triangle>=20230923",
         "matplotlib>=3.7",
         "rich>=13.0",
+        "manifold3d>=2.3",
+        "pyDOE3>=1.0",
+        "pillow>=9.0",
     ],
     extras_require={
-        "test": ["pytest>=7", "hypothesis>=6", "pytest-timeout>=2.1", "gmsh>=4.11"],
+        "test": ["pytest>=7", "hypothesis>=6", "pytest-timeout>=2.1", "gmsh>=4.11", "mpi4py>=3.1"],
         "mpi": ["mpi4py>=3.1"],
         "cad": ["gmsh>=4.11"],
     },

@@ -8,6 +8,12 @@ SHARED = REPO.parent / "shared"
 GEOMETRY = SHARED / "geometry"
 
 
+@pytest.fixture(autouse=True)
+def _openmdao_reports_elsewhere(tmp_path, monkeypatch):
+    """OpenMDAO writes each Problem's reports under OPENMDAO_WORKDIR: keep them out of the repo."""
+    monkeypatch.setenv("OPENMDAO_WORKDIR", str(tmp_path))
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", "slow: heavy case (whole corpus, large meshes); run with -m slow")
 

@@ -5,6 +5,15 @@ deck with the current per-family thicknesses, runs ``ccx`` in a temporary folder
 the ``.dat`` results. Partials are finite differences (``declare_partials(method='fd')``),
 declared only for the families that have faces, so one evaluation of the partials costs
 one ccx run per non-empty family. See ``docs/analysis.md``.
+
+The mesh comes either as the option ``mesh`` or, when that option is not given, as the
+discrete input ``shell_mesh`` (from a :class:`~shellmesh_mdao.components.group.ShellMeshGroup`:
+a new mesh at every design point). Then the ``thickness`` order is the option
+``family_names`` (default: the families of the option ``layout``), the clamped nodes are
+found again for every new mesh, FD partials are declared for every family, and a
+:class:`~shellmesh_mdao.errors.ShellMeshError` of the analysis (ccx fails on this mesh) is
+raised as ``om.AnalysisError`` so a DOE records the case as failed and goes on.
+``last_result.ks_von_mises`` is then in ``family_names`` order too.
 """
 from __future__ import annotations
 
@@ -15,6 +24,8 @@ from ..analysis import ANALYSIS_MATERIAL, ELEMENT_TYPES, LOWER_SKIN_PATTERN, ana
     find_ccx, n_families, resolve_up
 from ..export import DEFAULT_THICKNESS, resolve_material
 from ..mesh import ShellMesh
+from .layout_comp import case_errors
+from .mass_comp import discrete_family_names, mapped_family_values
 
 __all__ = ["CalculixShellAnalysis"]
 
@@ -32,7 +43,8 @@ class CalculixShellAnalysis(om.ExplicitComponent):
     at a point already analysed (the FD base point, a repeated run_model, a change of the
     thickness of a family without faces) does not run ccx again.
 
-    Options: ``mesh`` (required), ``layout`` (gives ``up`` and the span axis), ``material``
+    Options: ``mesh`` (or None: the discrete input ``shell_mesh``), ``family_names`` (thickness
+    order with ``shell_mesh``; default: from ``layout``), ``layout`` (gives ``up`` and the span axis), ``material``
     (overrides of aluminium E=70e9, nu=0.33, rho=2700), ``clamp`` ("root", "root_rib" or node
     ids), ``clamp_tol``, ``axis``, ``clamp_rotations``, ``up``, ``pressure`` (default 1e4,
     along +up on ``pressure_families``), ``pressure_families``, ``nodal_forces``
@@ -43,7 +55,10 @@ class CalculixShellAnalysis(om.ExplicitComponent):
 
     def initialize(self):
         o = self.options
-        o.declare("mesh", types=ShellMesh, desc="the shell mesh (component families = thickness groups)")
+        o.declare("mesh", default=None, types=(ShellMesh, type(None)),
+                  desc="the shell mesh (component families = thickness groups); None: discrete input shell_mesh")
+        o.declare("family_names", default=None, types=(list, tuple, type(None)),
+                  desc="thickness order when the mesh is the discrete input shell_mesh")
         o.declare("layout", default=None, desc="layout (dict, path or Layout): up direction and span axis")
         o.declare("material", default=None, types=(dict, type(None)), desc="overrides of ANALYSIS_MATERIAL")
         o.declare("clamp", default="root", desc="'root', 'root_rib' or 0-based node ids to clamp")
@@ -75,11 +90,18 @@ class CalculixShellAnalysis(om.ExplicitComponent):
 
             layout = load_layout(layout)
         self._up = resolve_up(o["up"], layout)
-        self._clamped = clamped_nodes(mesh, o["clamp"], layout=layout, axis=o["axis"], tol=o["clamp_tol"])
+        self._layout = layout
         resolve_material({**ANALYSIS_MATERIAL, **(o["material"] or {})})      # validate now, not at run time
-        n = n_families(mesh)
-        self.family_names = list(mesh.component_names) + [
-            f"component_{i}" for i in range(len(mesh.component_names), n)]
+        self._ctx_mesh = None
+        if mesh is None:
+            self.family_names = discrete_family_names(self, "CalculixShellAnalysis")
+            n = len(self.family_names)
+            self.add_discrete_input("shell_mesh", val=None, desc="the shell mesh (ShellMesh)")
+        else:
+            self._clamped = clamped_nodes(mesh, o["clamp"], layout=layout, axis=o["axis"], tol=o["clamp_tol"])
+            n = n_families(mesh)
+            self.family_names = list(mesh.component_names) + [
+                f"component_{i}" for i in range(len(mesh.component_names), n)]
         self.last_result = None
         self.add_input("thickness", val=np.full(n, float(o["thickness"])), shape=(n,),
                        desc="shell thickness of each family, in mesh.component_names order")
@@ -87,7 +109,8 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         self.add_output("max_von_mises", val=0.0, desc="largest integration-point von Mises stress")
         self.add_output("ks_von_mises", val=np.zeros(n), shape=(n,), desc="KS von Mises stress per family")
         self.add_output("tip_deflection", val=0.0, desc="tip displacement along up")
-        nz = np.flatnonzero(np.bincount(mesh.component, minlength=n) > 0)
+        # with shell_mesh the non-empty families are not known yet: partials of every family
+        nz = np.flatnonzero(np.bincount(mesh.component, minlength=n) > 0) if mesh is not None else np.arange(n)
         self._cache, self._cache_size, self._nonempty = {}, len(nz) + 2, nz   # results of recent thicknesses
         fd = dict(method="fd", step=o["fd_step"], step_calc="rel_element", form="forward")
         for name in ("mass", "max_von_mises", "tip_deflection"):
@@ -95,12 +118,42 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         self.declare_partials("ks_von_mises", "thickness", rows=np.repeat(nz, len(nz)), cols=np.tile(nz, len(nz)),
                               **fd)
 
-    def compute(self, inputs, outputs):
+    def _use_mesh(self, mesh):
+        """Per-mesh context when the mesh is the discrete input: clamped nodes, thickness map."""
+        o = self.options
+        if mesh is None:
+            raise om.AnalysisError(f"{self.msginfo}: no shell_mesh: connect a ShellMeshGroup's shell_mesh")
+        if self._ctx_mesh is mesh:
+            return
+        self._ctx_mesh = None
+        self._cache.clear()                        # results belong to the previous mesh
+        with case_errors():
+            self._clamped = clamped_nodes(mesh, o["clamp"], layout=self._layout, axis=o["axis"], tol=o["clamp_tol"])
+        pos = {name: i for i, name in enumerate(self.family_names)}
+        nm = n_families(mesh)
+        names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), nm)]
+        mapped_family_values(self, mesh, np.zeros(nm))     # every family with faces must be named
+        self._mesh_pos = np.array([pos.get(name, -1) for name in names], dtype=np.int64)
+        counts = np.bincount(mesh.component, minlength=nm)
+        self._nonempty = np.unique(self._mesh_pos[(counts > 0) & (self._mesh_pos >= 0)])
+        self._ctx_mesh = mesh
+
+    def compute(self, inputs, outputs, discrete_inputs=None, discrete_outputs=None):
         t = np.array(inputs["thickness"], dtype=np.float64)
+        mesh = self.options["mesh"]
+        if mesh is None:
+            mesh = discrete_inputs["shell_mesh"]
+            self._use_mesh(mesh)
         key = t[self._nonempty].tobytes()          # families without faces do not change the model
         r = self._cache.pop(key, None)
         if r is None:
-            r = self._run(t)
+            if self.options["mesh"] is None:
+                tm = np.where(self._mesh_pos >= 0, t[np.maximum(self._mesh_pos, 0)], float(self.options["thickness"]))
+                with case_errors():
+                    r = self._run(tm, mesh)
+                r.ks_von_mises = mapped_family_values(self, mesh, r.ks_von_mises)
+            else:
+                r = self._run(t)
         self._cache[key] = r                      # most recent last
         while len(self._cache) > self._cache_size:
             self._cache.pop(next(iter(self._cache)))
@@ -110,10 +163,10 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         outputs["ks_von_mises"] = r.ks_von_mises
         outputs["tip_deflection"] = r.tip_deflection
 
-    def _run(self, t):
+    def _run(self, t, mesh=None):
         o = self.options
         r = analyse_shell(
-            o["mesh"], t, material=o["material"], clamp=self._clamped, up=self._up,
+            o["mesh"] if mesh is None else mesh, t, material=o["material"], clamp=self._clamped, up=self._up,
             clamp_rotations=o["clamp_rotations"], pressure=float(o["pressure"]),
             pressure_families=o["pressure_families"], nodal_forces=o["nodal_forces"], tip_nodes=o["tip_nodes"],
             element=o["element"], ks_rho=float(o["ks_rho"]), ks_ref=o["ks_ref"], executable=o["ccx"],

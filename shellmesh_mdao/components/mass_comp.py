@@ -4,6 +4,13 @@
 thickness vector has one entry per component family, in ``mesh.component_names`` order
 (:attr:`MassComp.family_names`; families without faces are included and have zero
 derivative). Core function: :func:`shellmesh_mdao.analysis.shell_mass`.
+
+The mesh comes either as the option ``mesh`` (fixed for the life of the problem) or, when
+that option is not given, as the discrete input ``shell_mesh`` (e.g. from a
+:class:`~shellmesh_mdao.components.group.ShellMeshGroup`, a new mesh every design point); the
+thickness order is then the option ``family_names`` or, from the option ``layout``,
+:func:`~shellmesh_mdao.components.layout_comp.family_names`, and each mesh family takes the
+thickness of the family of the same name.
 """
 from __future__ import annotations
 
@@ -11,6 +18,7 @@ import numpy as np
 import openmdao.api as om
 
 from ..analysis import ANALYSIS_MATERIAL, family_areas, n_families
+from ..errors import ShellMeshError
 from ..export import DEFAULT_THICKNESS
 from ..mesh import ShellMesh
 
@@ -22,7 +30,9 @@ class MassComp(om.ExplicitComponent):
 
     Options
     -------
-    mesh : ShellMesh (required).
+    mesh : ShellMesh, or None (default): the mesh is then the discrete input ``shell_mesh``.
+    family_names : thickness order with ``shell_mesh`` (default: from ``layout``).
+    layout : layout (path, dict, Layout) giving ``family_names`` with ``shell_mesh``.
     thickness : initial thickness of every family (default 0.002, mesh length units).
     density : initial density (default 2700, aluminium, mass per volume in mesh units).
 
@@ -31,15 +41,25 @@ class MassComp(om.ExplicitComponent):
     """
 
     def initialize(self):
-        self.options.declare("mesh", types=ShellMesh, desc="the shell mesh (component families = thickness groups)")
+        self.options.declare("mesh", default=None, types=(ShellMesh, type(None)),
+                             desc="the shell mesh (component families = thickness groups); None: discrete "
+                                  "input shell_mesh")
+        self.options.declare("family_names", default=None, types=(list, tuple, type(None)),
+                             desc="thickness order when the mesh is the discrete input shell_mesh")
+        self.options.declare("layout", default=None, desc="layout giving family_names (with shell_mesh)")
         self.options.declare("thickness", default=DEFAULT_THICKNESS, desc="initial thickness of every family")
         self.options.declare("density", default=ANALYSIS_MATERIAL["rho"], desc="initial density")
 
     def setup(self):
         mesh = self.options["mesh"]
-        self.family_names = list(mesh.component_names) + [
-            f"component_{i}" for i in range(len(mesh.component_names), n_families(mesh))]
-        self._areas = family_areas(mesh)
+        if mesh is not None:
+            self.family_names = list(mesh.component_names) + [
+                f"component_{i}" for i in range(len(mesh.component_names), n_families(mesh))]
+            self._areas = family_areas(mesh)
+        else:
+            self.family_names = discrete_family_names(self, "MassComp")
+            self.add_discrete_input("shell_mesh", val=None, desc="the shell mesh (ShellMesh)")
+            self._areas, self._areas_of = np.zeros(len(self.family_names)), None
         n = len(self._areas)
         self.add_input("thickness", val=np.full(n, float(self.options["thickness"])), shape=(n,),
                        desc="shell thickness of each family, in mesh.component_names order")
@@ -48,9 +68,58 @@ class MassComp(om.ExplicitComponent):
         self.declare_partials("mass", "thickness")
         self.declare_partials("mass", "density")
 
-    def compute(self, inputs, outputs):
-        outputs["mass"] = inputs["density"][0] * (self._areas @ inputs["thickness"])
+    def _mesh_areas(self, discrete_inputs):
+        if self.options["mesh"] is None:
+            mesh = discrete_inputs["shell_mesh"]
+            if mesh is None:
+                raise om.AnalysisError(f"{self.msginfo}: no shell_mesh: connect a ShellMeshGroup's shell_mesh")
+            if self._areas_of is not mesh:
+                self._areas = mapped_family_values(self, mesh, family_areas(mesh))
+                self._areas_of = mesh
+        return self._areas
 
-    def compute_partials(self, inputs, partials):
+    def compute(self, inputs, outputs, discrete_inputs=None, discrete_outputs=None):
+        outputs["mass"] = inputs["density"][0] * (self._mesh_areas(discrete_inputs) @ inputs["thickness"])
+
+    def compute_partials(self, inputs, partials, discrete_inputs=None):
+        self._mesh_areas(discrete_inputs)
         partials["mass", "thickness"] = inputs["density"][0] * self._areas[None, :]
         partials["mass", "density"] = self._areas @ inputs["thickness"]
+
+
+def discrete_family_names(comp, what: str) -> list:
+    """Thickness order of a component whose mesh is the discrete input ``shell_mesh``: its
+    ``family_names`` option, else the families of its ``layout`` option."""
+    names = comp.options["family_names"]
+    if names is None and comp.options["layout"] is not None:
+        from .layout_comp import family_names
+
+        names = family_names(comp.options["layout"])
+    if not names:
+        raise ShellMeshError(f"{what} needs the mesh: give mesh=ShellMesh, or family_names=[...] (or layout=...) "
+                             "and connect a ShellMeshGroup's shell_mesh output to its shell_mesh input")
+    names = [str(n) for n in names]
+    if len(set(names)) != len(names):
+        raise ShellMeshError(f"{what}: family_names has repeated names; give each family once")
+    return names
+
+
+def mapped_family_values(comp, mesh: ShellMesh, values) -> np.ndarray:
+    """Per-family ``values`` of ``mesh`` (in ``mesh.component_names`` order) rearranged into the
+    component's ``family_names`` order (0 for families the mesh does not have). A mesh family
+    with faces that ``family_names`` does not name is a :class:`ShellMeshError`."""
+    names = comp.family_names
+    pos = {n: i for i, n in enumerate(names)}
+    values = np.asarray(values, dtype=np.float64)
+    out = np.zeros(len(names))
+    counts = np.bincount(mesh.component, minlength=len(values)) if mesh.n_faces else np.zeros(len(values), int)
+    mesh_names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names),
+                                                                              len(values))]
+    for i, n in enumerate(mesh_names):
+        if n in pos:
+            out[pos[n]] += values[i]
+        elif counts[i]:
+            raise ShellMeshError(f"{comp.msginfo}: the mesh has a family '{n}' ({int(counts[i])} faces) that "
+                                 f"family_names does not name; add it to family_names (or build the mesh "
+                                 "with the layout given to this component)")
+    return out

@@ -1,0 +1,174 @@
+"""OpenMDAO component: the member layout from continuous rib stations and spar chord fractions.
+
+:class:`LayoutComp` is the first stage of :class:`~shellmesh_mdao.components.group.ShellMeshGroup`.
+This module also holds what every stage component shares (:class:`StageComp`, the base of
+``ProjectionComp`` ... ``QuadComp``; :func:`case_errors`, which turns a user-caused failure of
+one design point into an :class:`openmdao.api.AnalysisError`; :func:`family_names`, the
+component families a layout gives, i.e. the order of the ``thickness`` vector of the
+analysis components).
+
+Failed design points. A design point that cannot be meshed (rib stations out of order or
+closer than the element size, a member that cannot be imprinted at this size, ...) raises a
+:class:`~shellmesh_mdao.errors.ShellMeshError` in the core function; the stage component
+re-raises it as ``om.AnalysisError`` with the same message (prefixed by the component's
+path). ``DOEDriver`` records such a case with ``success = 0`` and the message in ``msg``
+and goes on with the next case; the components downstream of the failed one do not run, so
+the recorded outputs of a failed case are stale: read ``case.success`` first. Errors that do
+not depend on the design point (missing surface file, bad size for the surface, unknown
+solver option, a layout file that does not parse) are raised as they are, when the problem
+is set up or at the first run, and stop the study.
+"""
+from __future__ import annotations
+
+import re
+from contextlib import contextmanager
+
+import numpy as np
+import openmdao.api as om
+
+from ..errors import LayoutError, ShellMeshError
+from ..layout import Layout, load_layout
+
+__all__ = ["LayoutComp", "StageComp", "case_errors", "family_names", "layout_input_names"]
+
+_VAR_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+
+
+@contextmanager
+def case_errors():
+    """Re-raise a :class:`ShellMeshError` (a design point the core functions reject) as
+    ``om.AnalysisError`` (message ``"<ErrorClass>: <message>"``; OpenMDAO prefixes the
+    component's path) so drivers record the case as failed and continue."""
+    try:
+        yield
+    except ShellMeshError as e:
+        raise om.AnalysisError(f"{type(e).__name__}: {e}") from e
+
+
+def family_names(layout) -> list:
+    """Component families of a pipeline mesh of ``layout`` (path, dict or
+    :class:`~shellmesh_mdao.layout.Layout`), in the order the pipeline creates them:
+    ``skin``, every member (:meth:`Layout.members` order: per wing its spars then its ribs,
+    then the explicit members), then per wing and bay ``<wing>/upper_skin/bay_<k>``,
+    ``<wing>/lower_skin/bay_<k>``. The counts are fixed by the layout, so this list does not
+    change when rib stations or spar chord fractions move; it is the order of the
+    ``thickness`` vector of ``MassComp`` / ``CalculixShellAnalysis`` fed by a ShellMeshGroup."""
+    lay = load_layout(layout)
+    names = ["skin"] + [m.name for m in lay.members()]
+    for w in lay.wings:
+        for k in range(len(w.rib_eta) - 1):
+            names += [f"{w.name}/upper_skin/bay_{k}", f"{w.name}/lower_skin/bay_{k}"]
+    return names
+
+
+def layout_input_names(layout) -> dict:
+    """``{input name: (wing, 'rib_eta' | 'spar_chord', initial values)}`` of the continuous layout
+    inputs: ``<wing>:rib_eta`` for each wing with ribs and ``<wing>:spar_chord`` for each wing
+    with spars (wings without ribs/spars get no input: OpenMDAO has no zero-size variables)."""
+    lay = load_layout(layout)
+    out = {}
+    for w in lay.wings:
+        if not _VAR_NAME.match(w.name):
+            raise LayoutError(f"wing name '{w.name}' cannot be an OpenMDAO variable prefix ('{w.name}:rib_eta'): "
+                              "use letters, digits, '_' and '-' only (start with a letter), e.g. 'right_wing'")
+        if len(w.rib_eta):
+            out[f"{w.name}:rib_eta"] = (w.name, "rib_eta", np.array(w.rib_eta, dtype=np.float64))
+        if len(w.spar_chord):
+            out[f"{w.name}:spar_chord"] = (w.name, "spar_chord", np.array(w.spar_chord, dtype=np.float64))
+    return out
+
+
+class LayoutComp(om.ExplicitComponent):
+    """Layout of the current design point.
+
+    Option ``layout`` (path, dict or Layout): the base layout; it fixes the wings and the
+    numbers of ribs and spars. Continuous inputs ``<wing>:rib_eta`` (shape = number of ribs,
+    stations in [0, 1], strictly increasing) and ``<wing>:spar_chord`` (shape = number of
+    spars, in (0, 1), strictly increasing), initialised from the base layout. Discrete
+    output ``layout``: ``base.with_parameters(rib_eta=..., spar_chord=...)``. The same
+    input values give the same Layout object (so the stages downstream can skip work).
+    An invalid design point is an ``om.AnalysisError`` (see the module docstring).
+
+    Partials: none. The output is discrete; the mesh is not a differentiable function of
+    the layout parameters (the element connectivity changes with them). Use DOE or
+    gradient-free drivers for the layout parameters.
+    """
+
+    def initialize(self):
+        self.options.declare("layout", desc="base layout (path, dict or Layout): wings and member counts")
+
+    def setup(self):
+        self._base: Layout = load_layout(self.options["layout"])
+        self._layout_inputs = layout_input_names(self._base)
+        for name, (wing, kind, val) in self._layout_inputs.items():
+            desc = ("rib stations eta in [0, 1], root to tip" if kind == "rib_eta"
+                    else "spar chord fractions in (0, 1), leading edge first")
+            self.add_input(name, val=val, shape=val.shape, desc=f"{wing}: {desc}")
+        self.add_discrete_output("layout", val=None, desc="the Layout of this design point")
+        self._memo = (None, None)
+
+    def compute(self, inputs, outputs, discrete_inputs=None, discrete_outputs=None):
+        vals = {name: np.array(inputs[name], dtype=np.float64) for name in self._layout_inputs}
+        key = b"".join(name.encode() + b"=" + v.tobytes() for name, v in vals.items())
+        if self._memo[0] == key:
+            discrete_outputs["layout"] = self._memo[1]
+            return
+        rib = {w: vals[n] for n, (w, kind, _) in self._layout_inputs.items() if kind == "rib_eta"}
+        spar = {w: vals[n] for n, (w, kind, _) in self._layout_inputs.items() if kind == "spar_chord"}
+        self._memo = (None, None)
+        with case_errors():
+            lay = self._base.with_parameters(rib_eta=rib, spar_chord=spar)
+        self._memo = (key, lay)
+        discrete_outputs["layout"] = lay
+
+
+class StageComp(om.ExplicitComponent):
+    """Base of the mesh stage components: runs ``self.stages`` (names of
+    :data:`shellmesh_mdao.pipeline.STAGES`) with :func:`~shellmesh_mdao.pipeline.run_stage` on the
+    discrete input ``state_in`` and gives the discrete output ``state``
+    (:class:`~shellmesh_mdao.pipeline.PipelineState`, frozen: never modified in place).
+
+    The input is named ``state_in`` (OpenMDAO forbids an input and an output of the same
+    name). When the input state is the very object of the previous run the previous output is
+    given again without running anything (option ``memoize``, default True): a driver that
+    changes only the thicknesses downstream of a ShellMeshGroup does not re-mesh.
+    No partials: inputs and outputs are discrete."""
+
+    stages: tuple = ()
+
+    def initialize(self):
+        self.options.declare("memoize", default=True, types=bool,
+                             desc="give the previous output again when the input state is the same object")
+
+    def setup(self):
+        self.add_discrete_input("state_in", val=None, desc="pipeline state after the previous stage")
+        self.add_discrete_output("state", val=None, desc=f"pipeline state after stage(s) {', '.join(self.stages)}")
+        self._memo = (None, None)
+        self.n_runs = 0             # stages actually run (not memoized)
+
+    def compute(self, inputs, outputs, discrete_inputs=None, discrete_outputs=None):
+        st = discrete_inputs["state_in"]
+        if st is None:
+            raise om.AnalysisError(f"{self.pathname}: no input state: connect the previous stage's 'state' output "
+                                   "(ShellMeshGroup does) and run the model")
+        if self.options["memoize"] and self._memo[0] is st:
+            out = self._memo[1]
+        else:
+            self._memo = (None, None)
+            with case_errors():
+                out = self.run_stages(st)
+            self._memo = (st, out)
+            self.n_runs += 1
+        discrete_outputs["state"] = out
+        self.set_outputs(out, outputs, discrete_outputs)
+
+    def run_stages(self, state):
+        """Run this component's stages on ``state``; returns the new state."""
+        from ..pipeline import run_stage
+
+        for name in self.stages:
+            state = run_stage(state, name)
+        return state
+
+    def set_outputs(self, state, outputs, discrete_outputs) -> None:
+        """Derived outputs of a stage (none by default)."""
