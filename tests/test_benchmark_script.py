@@ -1,0 +1,134 @@
+"""Smoke tests of run_scripts/benchmark.py: figures on known meshes, the child-process guard
+(errors, crashes, time limits), the 1M-triangle refinement on a tiny surface, and one small
+side-by-side case (pipeline + Gmsh) written as page + JSON."""
+import copy
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+# on sys.path (not loaded from a file spec) so the spawned child processes can import it too
+sys.path.insert(0, str(REPO / "run_scripts"))
+import benchmark as B  # noqa: E402
+
+from shellmesh_mdao.mesh import ShellMesh  # noqa: E402
+
+
+def _grid(nx, ny, h=1.0, z=None):
+    """nx x ny unit quads of edge h in the z=0 plane (or lifted by z(x, y))."""
+    x, y = np.meshgrid(np.arange(nx + 1) * h, np.arange(ny + 1) * h, indexing="ij")
+    pts = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size) if z is None else z(x.ravel(), y.ravel())])
+    idx = np.arange((nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+    quads = np.column_stack([idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(),
+                             idx[:-1, 1:].ravel()])
+    return pts, quads
+
+
+def test_member_mask_and_figures_of_a_square_grid():
+    pts, quads = _grid(4, 3, h=0.5)
+    comp = np.array([0] * 6 + [1] * 3 + [2] * 3, np.int32)
+    names = ["wing/upper_skin/bay_0", "wing/rib_1", "wing/spar_0/seg_2"]
+    mesh = ShellMesh(pts, quads, comp, names)
+    mask = B.member_face_mask(mesh.component, mesh.component_names)
+    assert mask.tolist() == [False] * 6 + [True] * 6
+    f = B.mesh_figures(mesh, 0.5)
+    assert (f["n_elements"], f["n_quads"], f["n_tris"], f["n_skin"], f["n_members"]) == (12, 12, 0, 6, 6)
+    assert f["quad_percent"] == 100.0 and f["n_folded"] == 0 and f["n_sj_le_0.2"] == 0
+    assert f["sj_mean"] == pytest.approx(1.0) and f["mean_sj_skin"] == pytest.approx(1.0)
+    assert f["mean_sj_members"] == pytest.approx(1.0)
+    assert f["min_angle"] == pytest.approx(90.0) and f["max_angle"] == pytest.approx(90.0)
+    assert f["angles_ok_percent"] == 100.0 and f["warp_p99"] == pytest.approx(0.0, abs=1e-9)
+    assert f["median_edge_ratio"] == pytest.approx(1.0) and f["valid"] and f["problems"] == []
+    assert all(B.target_checks(f).values())
+    # a skin-only mesh has no member figure: its target is "not applicable", not a failure
+    f1 = B.mesh_figures(ShellMesh(pts, quads), 1.0)
+    assert f1["mean_sj_members"] is None and B.target_checks(f1)["mean_sj_members"] is None
+    assert B.target_checks(f1)["median_edge_ratio"] is False          # edges are half the size
+
+
+def test_figures_count_folded_and_triangles():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],            # unit square
+                    [2, 0, 0], [3, 0, 0], [2.2, 0.2, 0], [2, 1, 0],        # dart: reflex corner at node 6
+                    [0, 2, 0]], float)
+    faces = np.array([[0, 1, 2, 3], [4, 5, 6, 7], [3, 2, 8, -1]])
+    f = B.mesh_figures(ShellMesh(pts, faces), 1.0)
+    assert (f["n_quads"], f["n_tris"]) == (2, 1)
+    assert f["quad_percent"] == pytest.approx(200 / 3)
+    assert f["n_folded"] == 1 and f["n_sj_le_0.2"] == 1 and f["sj_min"] <= 0
+    assert f["max_angle"] > 180 and f["angles_ok_percent"] == 50.0
+    t = B.target_checks(f)
+    assert t["quad_percent"] is False and t["n_sj_le_0.2"] is False and t["angles_ok_percent"] is False
+
+
+def test_warp_p99_of_a_twisted_grid():
+    pts, quads = _grid(10, 10, h=0.1, z=lambda x, y: 0.5 * x * y)     # hyperbolic paraboloid
+    f = B.mesh_figures(ShellMesh(pts, quads), 0.1)
+    assert 0 < f["warp_p99"] < 10 and f["n_folded"] == 0
+
+
+def test_run_in_child_reports_errors_crashes_and_timeouts():
+    r = B.run_in_child(math.sqrt, -1.0, timeout=60)           # raises ValueError in the child
+    assert r["status"] == "error" and "ValueError" in r["error"] and r["peak_rss_mb"] > 0
+    r = B.run_in_child(os._exit, 3, timeout=60)                # the child dies without a result
+    assert r["status"] == "crashed" and r["exit_code"] == 3
+    t0 = time.perf_counter()
+    r = B.run_in_child(time.sleep, 60, timeout=3)              # killed at the time limit
+    assert r["status"] == "timeout" and time.perf_counter() - t0 < 30
+
+
+def test_refine_surface_keeps_the_surface(tmp_path):
+    import trimesh
+
+    src = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(1.0, 2.0, 3.0)).export(str(src))
+    out = B.refine_surface(src, 100, tmp_path / "refined.stl")
+    assert (out["n_triangles"], out["levels"]) == (192, 2)          # 12 -> 48 -> 192
+    ref = trimesh.load(out["path"], force="mesh")
+    assert len(ref.faces) == 192 and ref.is_watertight
+    assert ref.area == pytest.approx(22.0) and ref.volume == pytest.approx(6.0)
+    mtime = Path(out["path"]).stat().st_mtime_ns
+    assert B.refine_surface(src, 100, tmp_path / "refined.stl") == out    # reused, not rewritten
+    assert Path(out["path"]).stat().st_mtime_ns == mtime
+
+
+def test_quick_case_writes_page_and_json(geometry_dir, tmp_path):
+    """One small case side by side (Gmsh, then the pipeline, in child processes), written as
+    page + JSON, keeping the hand-kept part of the page; perf/memory sections rendered too."""
+    out = tmp_path / "benchmarks.md"
+    out.write_text("# old page\n\n" + B.KEEP_MARKER + "\n\n## Building blocks\n\nkept table\n")
+    assert B.main(["--geometry-dir", str(geometry_dir), "--quick", "--only", "straight_wing",
+                   "--out", str(out)]) == 0
+    res = json.loads(out.with_suffix(".json").read_text())
+    assert res["quick"] and [c["name"] for c in res["corpus"]] == ["straight_wing"]
+    case = res["corpus"][0]
+    o, g = case["ours"], case["gmsh"]
+    assert o["status"] == "ok" and g["status"] == "ok"
+    fo, fg = o["figures"], g["figures"]
+    # the pipeline's output is all quads, conforming, with members; Gmsh's is skin only
+    assert fo["quad_percent"] == 100.0 and fo["valid"] and fo["n_members"] > 0 and fo["n_folded"] == 0
+    assert fg["n_members"] == 0 and fg["n_elements"] > 1000 and fg["quad_percent"] > 99
+    assert 0.5 < fg["median_edge_ratio"] < 1.5                      # Gmsh's quads come out at ~size
+    assert set(o["stages"]) >= {"load", "remesh", "merge", "quad"} and o["merge"]["status"]
+    assert case["time_ratio"] == pytest.approx(o["wall_s"] / g["wall_s"])
+    assert set(case["targets"]) == set(B.TARGETS)
+    page = out.read_text()
+    assert "## Quality targets" in page and "Gmsh (skin only)" in page and f"{fo['n_elements']:,}" in page
+    assert page.rstrip().endswith("kept table") and "# old page" not in page
+    # --from-json re-renders the same page without running anything
+    again = tmp_path / "again.md"
+    assert B.main(["--from-json", str(out.with_suffix(".json")), "--out", str(again)]) == 0
+    assert again.read_text() == page.replace(B.KEEP_MARKER + "\n\n## Building blocks\n\nkept table\n", "").rstrip() + "\n"
+    # deterministic page for the same figures; the performance and memory sections render
+    res2 = copy.deepcopy(res)
+    res2["performance"] = copy.deepcopy(case)
+    res2["memory"] = {"name": "straight_wing", "size": 0.05, "refined": {"levels": 3, "n_triangles": 1_000_000},
+                      "ours": copy.deepcopy(o), "load_before": 1.0, "load_after": 2.0, "within_budget": True}
+    p2 = B.render_page(res2)
+    assert B.render_page(res2) == p2
+    assert "## Performance target" in p2 and "Result: **" in p2 and "## Memory target" in p2
