@@ -120,3 +120,74 @@ def test_closest_on_polyline_brute_force():
     cand = a[None] + t[..., None] * ab[None]
     d = np.linalg.norm(cand - q[:, None], axis=2)
     assert np.allclose(np.linalg.norm(x - q, axis=1), d.min(1), atol=1e-12)
+
+
+# ------------------------------------------------------------------ coarsen_chains
+@pytest.fixture(scope="module")
+def coarsened(imprinted):
+    import copy
+
+    from shellmesh_mdao.imprint import coarsen_chains
+    from shellmesh_mdao.project import SurfaceLocator
+
+    m, chains, out, res = imprinted
+    loc = SurfaceLocator(m.points, m.faces[:, :3])
+    res2 = copy.deepcopy(res)
+    target = 0.08
+    co = coarsen_chains(out, loc, res2, target, max_deviation=0.01 * target)
+    return m, chains, out, res, co, res2, loc, target
+
+
+def test_coarsen_chains_fewer_vertices_valid_skin(coarsened):
+    m, chains, out, res, co, res2, loc, target = coarsened
+    assert co.check().ok, co.check().problems()
+    assert co.is_closed() and co.n_bodies() == 1
+    n0 = sum(len(r.vertices) for r in res)
+    n1 = sum(len(r.vertices) for r in res2)
+    assert n1 < 0.8 * n0, (n0, n1)
+    # the chains' ends and crossings survive: same shared vertices between ribs and spars
+    for r0, r1 in zip(res, res2):
+        assert np.allclose(co.points[r1.vertices[[0, -1]]], out.points[r0.vertices[[0, -1]]])
+        L0 = np.linalg.norm(np.diff(out.points[r0.vertices], axis=0), axis=1)
+        L1 = np.linalg.norm(np.diff(co.points[r1.vertices], axis=0), axis=1)
+        assert L1.max() <= max(1.3 * target, L0.max()) * (1 + 1e-9) + 1e-12, r0.member
+    assert np.isclose(co.face_areas().sum(), out.face_areas().sum(), rtol=5e-3)
+
+
+def test_coarsen_chains_exact_chains_of_mesh_edges(coarsened):
+    m, chains, out, res, co, res2, loc, target = coarsened
+    tm = trimesh.Trimesh(m.points, m.faces[:, :3], process=False)
+    diag = m.diagonal
+    topo = co.topology()
+    fe = {tuple(r): i for r, i in zip(co.feature_edges.tolist(), co.feature_edge_ids.tolist())}
+    fixed = set(co.fixed_vertices.tolist())
+    for spec, r in zip(chains, res2):
+        x = co.points[r.vertices]
+        assert np.abs(spec.plane.side(x)).max() < 1e-9 * diag, spec.member
+        assert tm.nearest.on_surface(x)[1].max() < 1e-9 * diag, spec.member
+        assert len(np.unique(r.vertices)) == len(r.vertices)          # a simple path
+        e = np.stack([r.vertices[:-1], r.vertices[1:]], 1)
+        assert (topo.edge_ids(e) >= 0).all(), spec.member
+        cid = co.component_names.index(spec.member)
+        assert all(fe.get(tuple(sorted(p))) == cid for p in e.tolist()), spec.member
+        assert set(r.vertices.tolist()) <= fixed
+    assert len(fe) == sum(len(r.vertices) - 1 for r in res2)           # no stale feature edges
+    by = {(r.member, r.side): r.vertices for r in res2}
+    for side in ("upper", "lower"):
+        for k in range(8):
+            for j in range(2):
+                assert len(np.intersect1d(by[(f"wing/rib_{k}", side)], by[(f"wing/spar_{j}", side)])) == 1
+    assert tm.nearest.on_surface(co.points)[1].max() < 1e-9 * diag
+
+
+def test_coarsen_chains_deterministic(coarsened):
+    import copy
+
+    from shellmesh_mdao.imprint import coarsen_chains
+
+    m, chains, out, res, co, res2, loc, target = coarsened
+    res3 = copy.deepcopy(res)
+    co2 = coarsen_chains(out, loc, res3, target, max_deviation=0.01 * target)
+    assert np.array_equal(co.points, co2.points) and np.array_equal(co.faces, co2.faces)
+    assert np.array_equal(co.feature_edges, co2.feature_edges)
+    assert all(np.array_equal(a.vertices, b.vertices) for a, b in zip(res2, res3))
