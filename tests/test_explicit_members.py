@@ -237,7 +237,7 @@ def test_wing_explicit_members_acceptance(wing_run):
             on = e_m[(np.abs((mesh.points[e_m] - s.plane_point) @ s.plane_normal) <= 1e-9 * surface.diagonal).all(1)]
             ids = topo.edge_ids(on)
             inner = ids[n_skin[ids] == 0]
-            assert len(inner) >= 2, (name, sp)
+            assert len(inner) >= 1, (name, sp)              # the closing line: one edge or more
             assert (topo.valence[inner] == 3).all(), (name, sp)
             assert np.isin(inner, topo.edge_ids(member_edges(mesh, sp))).all(), (name, sp)
     # closest-point projection: the chains of free_rib and skin_rib end at the closest skin points of

@@ -1,0 +1,110 @@
+"""Random layouts on the corpus, end to end (issue 8, section 1): the fixed-seed CI subset.
+
+Case ``i`` is ``draw_case(seed=i, geometry=GEOMETRIES[i])`` of run_scripts/stress_layouts.py for
+i = 0..3 (bwb, cessna210, straight_wing, swept_wing): seeds 0..3 taken as they come, not chosen
+by their outcome. Sizes are drawn in the upper half of the sweep's 4x range (x1.4 .. x2.8 of the
+benchmark size, :data:`CI_SIZE_FACTORS`) to keep the four runs near a minute. Each run must be
+``ok`` (``check_guarantees`` of test_pipeline.py: all quads, no scaled Jacobian <= 0.2, no
+duplicate points or hanging nodes, conforming junctions) or ``invalid layout`` (a documented
+ShellMeshError that the layout genuinely deserves, checked independently of the package); never
+``FAIL``. The larger sweep is ``python run_scripts/stress_layouts.py`` (docs/stress_layouts.md).
+
+The fast tests check the draw (ranges, determinism) and the classifier on known inputs.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "run_scripts"))
+import stress_layouts as SL  # noqa: E402
+
+CI_SIZE_FACTORS = (1.4, 2.8)
+
+#: measured FAILs of the package on the CI draws (07:25 UTC 2026-11-22), kept as strict xfails:
+#: the run returns a mesh below the quality guarantee instead of meshing it or refusing it with a
+#: documented error. Strict: when the package is fixed they XPASS and the mark must go.
+KNOWN_FAILS = {
+    "cessna210": "package bug: cessna210 seed 1 (11 ribs incl. 0 and 1, spars 0.161/0.513/0.903, size 0.6764 = "
+                 "2.7x): 118 elements with scaled Jacobian <= 0.2 (min 0.066), the pipeline warns and returns them; "
+                 "tight layout (aft spar 0.58 h from the trailing edge, tip rib 0.40 h from the tip) but accepted "
+                 "by the validator; half of the poor elements lie beyond the tip rib, most others in the strip "
+                 "between the aft spar and the trailing edge (c 0.92-0.96)",
+    "straight_wing": "package bug: straight_wing seed 2 (6 ribs 0.1337..0.7054, spars 0.096/0.289, size 0.03444 = "
+                     "1.7x): 1 element with scaled Jacobian 0.181 <= 0.2 on a loose layout (every gap >= 2.5 h), in the "
+                     "skin just root-side of rib_0 (eta 0.127, c 0.13) next to the rib_0 / spar_0 corner",
+    "swept_wing": "package bug: swept_wing seed 3 (ribs 0.0276/0.6886/0.7934, one spar 0.474, size 0.03299 = "
+                  "1.65x): 36 elements with scaled Jacobian <= 0.2 (min 0.049) on a loose layout (every gap >= 2 h), "
+                  "beside ribs 1 and 2 at c 0.70-0.74; one spar means full-chord ribs: the same ribs and size "
+                  "with spars 0.15/0.65 or 0.3/0.474 pass (min SJ 0.335)",
+}
+CI_CASES = [pytest.param(i, g, id=g, marks=[pytest.mark.xfail(strict=True, reason=KNOWN_FAILS[g])]
+                         if g in KNOWN_FAILS else []) for i, g in enumerate(SL.GEOMETRIES)]
+
+
+def test_draw_ranges_and_determinism(manifest, geometry_dir):
+    cases = [SL.draw_case(s, None, manifest=manifest, geometry_dir=geometry_dir) for s in range(24)]
+    again = [SL.draw_case(s, None, manifest=manifest, geometry_dir=geometry_dir) for s in range(24)]
+    assert cases == again, "the draw is deterministic per seed"
+    assert {c["geometry"] for c in cases} == set(SL.GEOMETRIES)
+    for c in cases:
+        eta, sp = np.array(c["ribs"]), np.array(c["spars"])
+        assert 1 <= len(eta) <= 20 and (np.diff(eta) > 0).all() and eta.min() >= 0 and eta.max() <= 1
+        assert 1 <= len(sp) <= 3 and (np.diff(sp) > 0).all() and sp.min() > 0.05 and sp.max() < 0.95
+        f = c["size"] / SL.BASE_SIZES[c["geometry"]]
+        assert 0.7 * 0.999 <= f <= 2.8 * 1.001
+        t = SL.layout_tightness(manifest, c, geometry_dir)
+        if c["spacing"] == "spaced":
+            # spaced draws are valid for the validator: every gap at least the element size
+            assert t["rib_gap"] >= 1.0 and t["spar_gap"] >= 1.0
+    # the fixed seed of case 0 is pinned: a change of the draw changes the CI subset
+    c0 = SL.draw_case(0, "bwb", CI_SIZE_FACTORS, manifest=manifest, geometry_dir=geometry_dir)
+    assert c0["ribs"][:2] == [0.0027, 0.0336] and c0["spars"] == [0.871] and c0["size"] == 0.5064
+
+
+def test_classifier_on_known_messages(manifest, geometry_dir):
+    assert SL.is_documented("ribs 'wing/rib_3' (eta=0.31) and 'wing/rib_4' (eta=0.33) are 0.01 apart, closer "
+                            "than the element size 0.02: use fewer ribs or a smaller element size")
+    assert SL.is_documented("wing/spar_0 (upper): its plane cuts the surface only outside the member's bounds; "
+                            "check the layout's stations and chord fractions")
+    assert not SL.is_documented("index 7 is out of bounds for axis 0 with size 3")
+    # one rib and two spars: zero-length spars, a tight layout whatever the size
+    t = SL.layout_tightness(manifest, {"geometry": "straight_wing", "ribs": [0.5], "spars": [0.2, 0.6],
+                                       "size": 0.02}, geometry_dir)
+    assert t["zero_length_spars"] and "single rib" in t["tight"]
+    proj = ("member 'right_wing/rib_0': rays miss the skin upward (+up) from [5.7, 2.2, 3.0]: the member's "
+            "chord-plane points must lie inside the wing; check the wing corners (root_le/root_te/tip_le/tip_te), "
+            "'up', the stations and the chord fractions")
+    inside = {"outside": [], "zero_length_spars": False, "tight": "rib gap 1.50 element sizes (< 2)"}
+    assert SL.classify_refusal("ProjectionError", proj, "project", inside)[0] == "FAIL", \
+        "a projection refusal needs a member outside the wing, not just a tight layout"
+    assert SL.classify_refusal("ProjectionError", proj, "project", dict(inside, outside=["right_wing/rib_0"]))[0] \
+        == "invalid layout"
+    assert SL.classify_refusal("ImprintError", "x: the imprinted curve is broken into pieces; use a smaller --size",
+                               "imprint", inside)[0] == "invalid layout"
+    assert SL.classify_refusal("ImprintError", "x: the imprinted curve is broken into pieces; use a smaller --size",
+                               "imprint", dict(inside, tight=""))[0] == "FAIL"
+    assert SL.classify_refusal("ImprintError", "something new went wrong", "imprint", inside)[0] == "FAIL"
+    # ribs 0.001 apart on the straight wing (span 3.9): 0.0039 apart, below the size 0.02
+    case = {"seed": -1, "geometry": "straight_wing", "ribs": [0.0, 0.5, 0.501, 1.0], "spars": [0.2, 0.6],
+            "size": 0.02, "size_factor": 1.0}
+    r = SL.run_case(case, geometry_dir, manifest)
+    assert r["outcome"] == "invalid layout" and r["stage"] == "layout", r
+    assert r["error"].startswith("LayoutError: ribs ") and "ribs closer than the element size" in r["reason"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed,geometry", CI_CASES)
+def test_random_layout_end_to_end(manifest, geometry_dir, seed, geometry):
+    case = SL.draw_case(seed, geometry, CI_SIZE_FACTORS, manifest=manifest, geometry_dir=geometry_dir)
+    r = SL.run_case(case, geometry_dir, manifest)
+    assert r["outcome"] in ("ok", "invalid layout"), \
+        f"{case}: {r['outcome']} at stage {r['stage']}: {r['reason']}: {r['error']}\n{r.get('traceback', '')}"
+    if r["outcome"] == "invalid layout":
+        assert r["reason"] and r["error"]
+    else:
+        assert r["min_sj"] > 0.2 and r["n_poor"] == 0 and r["n_elements"] > 0
