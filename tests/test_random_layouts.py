@@ -16,12 +16,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "run_scripts"))
-import stress_layouts as SL  # noqa: E402
+import stress_layouts as SL
 
 CI_SIZE_FACTORS = (1.4, 2.8)
 
