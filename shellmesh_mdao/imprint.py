@@ -64,29 +64,10 @@ class ChainResult:
 
 def closest_on_polyline(q: np.ndarray, poly: np.ndarray, closed: bool = False) -> np.ndarray:
     """Closest points on a polyline (k, 3) to query points (n, 3), vectorised via a KD-tree
-    of segment midpoints with a conservative candidate radius."""
+    of segment midpoints with a conservative candidate radius (:func:`_closest_on_segments`)."""
     q = np.atleast_2d(np.asarray(q, float))
     p = np.vstack([poly, poly[:1]]) if closed else poly
-    a, b = p[:-1], p[1:]
-    ab = b - a
-    L = np.linalg.norm(ab, axis=1)
-    mid = 0.5 * (a + b)
-    tree = cKDTree(mid)
-    # candidate radius: distance to the nearest midpoint plus half the longest segment
-    d0, _ = tree.query(q)
-    r = d0 + 0.5 * L.max() + 1e-300
-    cand = tree.query_ball_point(q, r)
-    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
-    qi = np.repeat(np.arange(len(q)), cnt)
-    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
-    L2 = np.einsum("ij,ij->i", ab[si], ab[si])
-    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    x = a[si] + t[:, None] * ab[si]
-    dist = np.linalg.norm(x - q[qi], axis=1)
-    order = np.lexsort((dist, qi))
-    first = np.ones(len(order), bool)
-    first[1:] = qi[order][1:] != qi[order][:-1]
-    return x[order[first]]
+    return _closest_on_segments(q, p[:-1], p[1:])[0]
 
 
 def _tri_angles_min(P, T):
