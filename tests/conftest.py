@@ -8,6 +8,22 @@ SHARED = REPO.parent / "shared"
 GEOMETRY = SHARED / "geometry"
 
 
+def _have_ccx() -> bool:
+    from shellmesh_mdao.analysis import find_ccx
+    from shellmesh_mdao.errors import SolverError
+
+    try:
+        find_ccx()
+        return True
+    except SolverError:
+        return False
+
+
+#: skip marker for tests that run CalculiX (``from conftest import needs_ccx``)
+needs_ccx = pytest.mark.skipif(not _have_ccx(), reason="CalculiX 'ccx' is not installed (apt-get install "
+                                                       "calculix-ccx); CI has it")
+
+
 @pytest.fixture(autouse=True)
 def _openmdao_reports_elsewhere(tmp_path, monkeypatch):
     """OpenMDAO writes each Problem's reports under OPENMDAO_WORKDIR: keep them out of the repo."""

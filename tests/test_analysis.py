@@ -25,16 +25,7 @@ THEORY = BEND + SHEAR
 MAT = {"E": E, "nu": NU}
 
 
-def _have_ccx() -> bool:
-    try:
-        find_ccx()
-        return True
-    except SolverError:
-        return False
-
-
-needs_ccx = pytest.mark.skipif(not _have_ccx(), reason="CalculiX 'ccx' is not installed (apt-get install "
-                                                       "calculix-ccx); CI has it")
+from conftest import needs_ccx  # noqa: E402
 
 
 def _patch(o, u, v, nu, nv, tri):

@@ -5,7 +5,7 @@ import openmdao.api as om
 import pytest
 from openmdao.utils.assert_utils import assert_check_partials
 
-from shellmesh_mdao.analysis import ANALYSIS_MATERIAL, find_ccx
+from shellmesh_mdao.analysis import ANALYSIS_MATERIAL
 from shellmesh_mdao.components import calculix_comp
 from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis
 from shellmesh_mdao.components.mass_comp import MassComp
@@ -14,16 +14,7 @@ from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.mesh import ShellMesh
 
 
-def _have_ccx() -> bool:
-    try:
-        find_ccx()
-        return True
-    except SolverError:
-        return False
-
-
-needs_ccx = pytest.mark.skipif(not _have_ccx(), reason="CalculiX 'ccx' is not installed (apt-get install "
-                                                       "calculix-ccx); CI has it")
+from conftest import _have_ccx, needs_ccx  # noqa: E402
 
 SPAN = 6.0
 

@@ -22,11 +22,9 @@ import numpy as np
 import openmdao.api as om
 import pytest
 
-from shellmesh_mdao.analysis import find_ccx
 from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis
 from shellmesh_mdao.components.group import DOEDriver, ShellMeshGroup
 from shellmesh_mdao.components.mass_comp import MassComp
-from shellmesh_mdao.errors import SolverError
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.pipeline import run_pipeline
 
@@ -37,16 +35,7 @@ SURFACE = naca_wing(n_chord=24, n_span=16)
 LAYOUT = naca_wing_layout(ribs=3)
 
 
-def _have_ccx() -> bool:
-    try:
-        find_ccx()
-        return True
-    except SolverError:
-        return False
-
-
-needs_ccx = pytest.mark.skipif(not _have_ccx(), reason="CalculiX 'ccx' is not installed (apt-get install "
-                                                       "calculix-ccx); CI has it")
+from conftest import needs_ccx  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
