@@ -86,18 +86,7 @@ def face_mask(mesh, names):
     return np.isin(mesh.component, [i for n in names for i in component_ids(mesh, n)])
 
 
-def poly_area(poly, normal):
-    return 0.5 * abs(np.cross(poly, np.roll(poly, -1, axis=0)).sum(0) @ normal)
-
-
-def clip_polygon(poly, point, normal):
-    """Sutherland-Hodgman: the part of a closed polygon with (x - point).normal >= 0."""
-    d = (poly - point) @ normal
-    nxt, dn = np.roll(poly, -1, axis=0), np.roll(d, -1)
-    inside, cross = d >= 0, (d >= 0) != (dn >= 0)
-    t = np.where(cross, d / np.where(cross, d - dn, 1.0), 0.0)
-    pts = np.stack([poly, poly + t[:, None] * (nxt - poly)], 1)
-    return pts[np.stack([inside, cross], 1)]
+from test_members import clip_polygon, poly_area  # noqa: E402  (the same polygon helpers)
 
 
 def segment_planes(spec):
