@@ -41,7 +41,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import multiprocessing as mp
 import re
 import sys
 import time
@@ -443,39 +442,26 @@ def run_case(case: dict, geometry_dir: Path = GEOMETRY_DIR, manifest: dict | Non
 
 
 # ============================================================================ child processes
-def _child(conn, case, geometry_dir):
+def _run_case_guarded(case, geometry_dir):
+    """:func:`run_case` that reports a crash of the runner itself as a FAIL row (never raises)."""
     try:
-        out = run_case(case, Path(geometry_dir))
+        return run_case(case, Path(geometry_dir))
     except BaseException as e:  # noqa: BLE001
-        out = dict(case, outcome="FAIL", reason="runner crashed", error=f"{type(e).__name__}: {e}")
-    conn.send(out)
-    conn.close()
+        return dict(case, outcome="FAIL", reason="runner crashed", error=f"{type(e).__name__}: {e}")
 
 
 def run_case_in_child(case: dict, timeout: float = 600.0, geometry_dir: Path = GEOMETRY_DIR) -> dict:
-    """:func:`run_case` in a fresh spawned process with a time limit; a time-out or a crash of
-    the child is a FAIL."""
-    ctx = mp.get_context("spawn")
-    recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(send, case, str(geometry_dir)), daemon=True)
-    t0 = time.perf_counter()
-    proc.start()
-    send.close()
-    out = None
-    if recv.poll(timeout):
-        try:
-            out = recv.recv()
-        except EOFError:
-            out = None
-    elapsed = time.perf_counter() - t0
-    proc.join(10 if out is not None else 0.5)
-    if proc.is_alive():
-        proc.kill()
-        proc.join()
-    recv.close()
-    if out is None:
-        what = f"time-out: no result after {timeout:g} s (killed)" if elapsed >= timeout else \
-            f"child process died (exit code {proc.exitcode})"
+    """:func:`run_case` in a fresh spawned process with a time limit (the benchmark's
+    :func:`benchmark.run_in_child`); a time-out or a crash of the child is a FAIL."""
+    from benchmark import run_in_child
+
+    out = run_in_child(_run_case_guarded, case, str(geometry_dir), timeout=timeout)
+    status, elapsed, exit_code = out.pop("status"), out.pop("process_wall_s"), out.pop("exit_code", None)
+    for k in ("peak_rss_mb", "child_cpu_s"):
+        out.pop(k, None)
+    if status in ("timeout", "crashed"):
+        what = f"time-out: no result after {timeout:g} s (killed)" if status == "timeout" else \
+            f"child process died (exit code {exit_code})"
         out = dict(case, outcome="FAIL", reason=what, error=what, seconds=round(elapsed, 2))
     out["process_seconds"] = round(elapsed, 2)
     return out
