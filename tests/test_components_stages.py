@@ -258,18 +258,10 @@ def test_mass_comp_with_discrete_mesh(states):
         p3.setup()
 
 
-def _have_ccx() -> bool:
-    from shellmesh_mdao.analysis import find_ccx
-    from shellmesh_mdao.errors import SolverError
-
-    try:
-        find_ccx()
-        return True
-    except SolverError:
-        return False
+from conftest import needs_ccx  # noqa: E402
 
 
-@pytest.mark.skipif(not _have_ccx(), reason="CalculiX 'ccx' is not installed (apt-get install calculix-ccx); CI has it")
+@needs_ccx
 def test_calculix_comp_discrete_mesh_matches_option_route(states):
     from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis
 
