@@ -62,6 +62,12 @@ GEOMETRIES = tuple(sorted(BASE_SIZES))
 SIZE_FACTORS = (0.7, 2.8)
 #: a later-stage refusal is "genuine" only when members come closer than this many element sizes
 TIGHT = 2.0
+#: ... or when a spar web is less than this many element sizes tall somewhere (the package
+#: refuses below 0.3, :data:`shellmesh_mdao.project.MIN_MEMBER_HEIGHT`)
+HEIGHT_TIGHT = 0.4
+#: ... or when a full-chord rib's section (the input skin cut by its plane) has a corner sharper
+#: than asin(0.2) degrees (a quad in it cannot have a scaled Jacobian above 0.2)
+WEDGE_TIGHT = math.degrees(math.asin(0.2))
 #: drawn ribs and spars are at least ``gap`` element sizes apart, ``gap`` uniform in this range
 #: (per case; "free" draws have no minimum spacing)
 GAP_RANGE = (1.05, 3.0)
@@ -212,6 +218,32 @@ def _first_hit(geometry_dir, file, pts: np.ndarray, d: np.ndarray) -> np.ndarray
     return out
 
 
+def _section_corner(geometry_dir, file, origin: np.ndarray, normal: np.ndarray) -> float:
+    """Smallest corner angle (degrees) of the closed section of the skin by the plane through
+    ``origin`` (a point inside the wing) with ``normal``: of the section's loops, the smallest
+    one whose bounding box holds ``origin`` (the wing's airfoil, not a fuselage around it)."""
+    sec = _surface(geometry_dir, file).section(plane_origin=origin, plane_normal=normal)
+    if sec is None:
+        return math.inf
+    best, area = math.inf, math.inf
+    for loop in sec.discrete:
+        L = np.asarray(loop, dtype=np.float64)
+        if len(L) < 4 or not np.allclose(L[0], L[-1]):
+            continue
+        lo, hi = L.min(axis=0), L.max(axis=0)
+        if not ((lo - 1e-9 <= origin) & (origin <= hi + 1e-9)).all():
+            continue
+        L = L[:-1]
+        u, v = np.roll(L, 1, axis=0) - L, np.roll(L, -1, axis=0) - L
+        lu, lv = np.linalg.norm(u, axis=1), np.linalg.norm(v, axis=1)
+        ok = (lu > 0) & (lv > 0)
+        ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", u[ok], v[ok]) / (lu[ok] * lv[ok]), -1, 1)))
+        a = float(np.prod(np.sort(hi - lo)[1:]))
+        if len(ang) and a < area:
+            best, area = float(ang.min()), a
+    return best
+
+
 def layout_tightness(manifest: dict, case: dict, geometry_dir: Path = GEOMETRY_DIR) -> dict:
     """How close the members of ``case`` come to each other and to the ends of the wing,
     computed from the manifest's wing corners and the surface file (trimesh ray casts), not
@@ -222,16 +254,22 @@ def layout_tightness(manifest: dict, case: dict, geometry_dir: Path = GEOMETRY_D
 
     * ``rib_gap``: smallest distance between consecutive rib planes;
     * ``spar_gap``: smallest distance between consecutive spars along the root and tip chords;
-    * ``edge_gap``: the first/last spar to the leading/trailing edge along those chords;
+    * ``edge_gap``: the first/last spar to the leading/trailing edge along the chords of the first
+      and the last rib (root and tip without ribs), where the spars run;
     * ``end_gap``: the outermost ribs to the end of the skin (first skin hit of rays along -n
       from the first rib's curve and along +n from the last rib's curve, 21 points each);
+    * ``spar_height``: the smallest spar web height (distance between the first skin hits along
+      +up and -up from its 41 points between the rib planes);
+    * ``wedge``: with fewer than two spars (full-chord ribs), the sharpest corner (degrees) of
+      the rib planes' sections of the skin;
     * ``outside``: members whose curve (41 points, spars along their true extent between the
       rib planes) has a point from which a ray along +up or -up misses the skin -- the member
       leaves the wing (what the projection stage refuses);
     * ``zero_length_spars``: one rib and spars (the spars run from that rib plane to itself).
 
     Gaps are in element sizes (inf when undefined). ``tight`` is "" or the reasons the layout
-    is tight: outside members, zero-length spars, or a gap below :data:`TIGHT`."""
+    is tight: outside members, zero-length spars, a gap below :data:`TIGHT`, a spar web lower
+    than :data:`HEIGHT_TIGHT` or a full-chord rib section corner below :data:`WEDGE_TIGHT`."""
     g = manifest["geometries"][case["geometry"]]
     h = case["size"]
     f = g["file"]
@@ -239,7 +277,7 @@ def layout_tightness(manifest: dict, case: dict, geometry_dir: Path = GEOMETRY_D
     outside = []
     eta = np.asarray(case["ribs"], dtype=np.float64)
     c = np.asarray(case["spars"], dtype=np.float64)
-    rib_gap = spar_gap = edge_gap = math.inf
+    rib_gap = spar_gap = edge_gap = spar_height = wedge = math.inf
     tt = np.linspace(0.0, 1.0, 41)
     for w in g["wings"]:
         rle, rte, tle, tte = (np.asarray(w[k], dtype=np.float64) for k in ("root_le", "root_te", "tip_le", "tip_te"))
@@ -264,6 +302,9 @@ def layout_tightness(manifest: dict, case: dict, geometry_dir: Path = GEOMETRY_D
         if len(eta) >= 2:
             rib_gap = min(rib_gap, float(np.diff([p @ n for p in planes]).min()) / h)
         rib_curves = [S(eta_on(cr, p), cr) for p in planes]
+        if len(c) < 2:                          # full-chord ribs: the sharpest corner of their sections
+            for p in planes:
+                wedge = min(wedge, _section_corner(geometry_dir, f, p, n))
         for k, pts in enumerate(rib_curves):
             if _outside(geometry_dir, f, pts, up).any():
                 outside.append(f"{w['name']}/rib_{k}")
@@ -276,11 +317,17 @@ def layout_tightness(manifest: dict, case: dict, geometry_dir: Path = GEOMETRY_D
             pts = S(e0 + (e1 - e0) * tt, cj)
             if _outside(geometry_dir, f, pts, up).any():
                 outside.append(f"{w['name']}/spar_{j}")
+            else:
+                web = _first_hit(geometry_dir, f, pts, up) + _first_hit(geometry_dir, f, pts, -up)
+                spar_height = min(spar_height, float(web.min()) / h)
         chords = (np.linalg.norm(rte - rle), np.linalg.norm(tte - tle))
         if len(c) >= 2:
             spar_gap = min(spar_gap, min(float(np.diff(c).min()) * L for L in chords) / h)
         if len(c):
-            edge_gap = min(edge_gap, min(min(float(c[0]), 1 - float(c[-1])) * L for L in chords) / h)
+            # along the chords where the spars run: at the first and the last rib (root and tip without ribs)
+            ends = (float(eta.min()), float(eta.max())) if len(eta) else (0.0, 1.0)
+            run = [float(np.linalg.norm(S(e, 1.0) - S(e, 0.0))) for e in ends]
+            edge_gap = min(edge_gap, min(min(float(c[0]), 1 - float(c[-1])) * L for L in run) / h)
     zero = len(eta) == 1 and len(c) > 0
     reasons = []
     if outside:
@@ -293,7 +340,13 @@ def layout_tightness(manifest: dict, case: dict, geometry_dir: Path = GEOMETRY_D
                     ("outermost rib to the end of the skin", end_gap)):
         if v < TIGHT:
             reasons.append(f"{what} {v:.2f} element sizes (< {TIGHT:g})")
+    if spar_height < HEIGHT_TIGHT:
+        reasons.append(f"a spar web {spar_height:.2f} element sizes tall (< {HEIGHT_TIGHT:g})")
+    if wedge < WEDGE_TIGHT:
+        reasons.append(f"a full-chord rib section with a {wedge:.1f} deg corner (< {WEDGE_TIGHT:.1f}: no quad in it "
+                       "has a scaled Jacobian above 0.2)")
     return {"rib_gap": rib_gap, "spar_gap": spar_gap, "edge_gap": edge_gap, "end_gap": end_gap,
+            "spar_height": spar_height, "wedge": wedge,
             "zero_length_spars": zero, "outside": outside, "tight": "; ".join(reasons)}
 
 
@@ -495,10 +548,11 @@ def write_page(results: list, meta: dict, md_path: Path) -> None:
          "ok = all quads, no element with scaled Jacobian <= 0.2, no duplicate points, no hanging nodes, "
          "conforming junctions (`check_guarantees` of tests/test_pipeline.py). Gaps are in element sizes h "
          "(independent of the package: rib-plane offsets, spar chord distances at root/tip, spar to LE/TE, "
-         f"outermost rib to the skin's end along the rib normal); a layout is *tight* when one is below {TIGHT:g} h.",
+         f"outermost rib to the skin's end along the rib normal, smallest spar web height); a layout is *tight* "
+         f"when a gap is below {TIGHT:g} h or a spar web below {HEIGHT_TIGHT:g} h.",
          "",
          "| seed | geometry | ribs (eta) | spars (c) | size (x base) | outcome | seconds | min SJ | elements | "
-         "gaps: rib / spar / spar-edge / rib-end (h) |",
+         "gaps: rib / spar / spar-edge / rib-end / spar height (h) |",
          "| ---: | --- | --- | --- | --- | --- | ---: | ---: | ---: | --- |"]
     for r in results:
         ribs = r["ribs"]
@@ -506,7 +560,7 @@ def write_page(results: list, meta: dict, md_path: Path) -> None:
             f"{len(ribs)}: {ribs[0]:g}, {ribs[1]:g} ... {ribs[-1]:g}"
         if len(ribs) <= 6:
             rs = f"{len(ribs)}: {rs}"
-        gaps = " / ".join(_fmt(r.get(k), "{:.2f}") for k in ("rib_gap", "spar_gap", "edge_gap", "end_gap"))
+        gaps = " / ".join(_fmt(r.get(k), "{:.2f}") for k in ("rib_gap", "spar_gap", "edge_gap", "end_gap", "spar_height"))
         oc = r["outcome"] if r["outcome"] != "FAIL" else "**FAIL**"
         L.append(f"| {r['seed']} | {r['geometry']} | {rs} | {', '.join(f'{c:g}' for c in r['spars'])} | "
                  f"{r['size']:g} ({r['size_factor']:.2f}) | {oc} | {_fmt(r.get('seconds'), '{:.1f}')} | "

@@ -57,6 +57,9 @@ __all__ = ["MemberInfo", "member_infos", "build_members", "member_statistics", "
 
 #: Minimum angle (degrees) requested from the constrained Delaunay refinement (``q``).
 DEFAULT_MIN_ANGLE = 30.0
+#: a closed (full-chord) member's outline may not have a corner sharper than this: a quad in
+#: a corner of angle a has a scaled Jacobian of at most sin(a), and the pipeline guarantees > 0.2
+MIN_LOOP_CORNER = float(np.degrees(np.arcsin(0.2)))
 _EQ_AREA = np.sqrt(3.0) / 4.0
 
 
@@ -1090,8 +1093,42 @@ def _dist_to_polyline(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return np.linalg.norm(_arc_point(p, cum, s) - q, axis=1)
 
 
+def _check_loop_corners(mems, P) -> None:
+    """Refuse a closed member (full-chord rib) whose outline has a corner sharper than
+    :data:`MIN_LOOP_CORNER`: where the rib plane cuts a sharp leading or trailing edge (a
+    wedge of the skin), every quad at that corner has a scaled Jacobian of at most
+    sin(corner), below the pipeline's guarantee, whatever the element size."""
+    for m in mems:
+        if m.loop is None or len(m.loop) < 3:
+            continue
+        L = P[m.loop]
+        u, v = np.roll(L, 1, axis=0) - L, np.roll(L, -1, axis=0) - L
+        cosv = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1),
+                                                        1e-300)
+        ang = np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0)))
+        k = int(np.argmin(ang))
+        if ang[k] < MIN_LOOP_CORNER:
+            p = ", ".join(f"{x:.6g}" for x in L[k])
+            raise LayoutError(
+                f"member '{m.name}' cuts a sharp edge of the skin: its outline has a {ang[k]:.1f} deg corner at "
+                f"[{p}] (the upper and lower skin meet there at that angle), and any quad in that corner has a "
+                f"scaled Jacobian of at most sin({ang[k]:.1f} deg) = {np.sin(np.radians(ang[k])):.3f}, below the "
+                f"0.2 guarantee at any element size; end the rib on spars (with two or more spars every rib "
+                f"runs between them) or round that edge of the surface")
+
+
+def _opposite_angle(P, tri, a, b):
+    """Angle (degrees) of each triangle ``tri`` (k, 3) at its corner that is neither ``a`` nor ``b``."""
+    c = np.where((tri[:, 0] != a) & (tri[:, 0] != b), tri[:, 0],
+                 np.where((tri[:, 1] != a) & (tri[:, 1] != b), tri[:, 1], tri[:, 2]))
+    u, v = P[a] - P[c], P[b] - P[c]
+    cosv = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
+    return np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0)))
+
+
 def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, max_pieces: int = 16,
-                            min_piece: float = 0.02, min_height: float = 0.1, rounds: int = 3):
+                            min_piece: float = 0.02, min_height: float = 0.1, rounds: int = 3,
+                            min_fan_angle: float = 15.0):
     """Split chain edges that are long compared with the member's local height.
 
     Where a member is thinner than its chain spacing (the spars of a thin wing), no
@@ -1101,8 +1138,13 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
     member plane), and the two skin triangles on that edge are split into fans. Pieces are
     never shorter than ``min_piece * size`` and at most ``max_pieces``; where the member is
     thinner than ``min_height * size`` (the tip of a wedge, a trailing edge) nothing is
-    split. Returns the updated ``(P, F, C, FE, FID)``; the members' sides get the new
-    vertices (call ``sync_sides`` afterwards)."""
+    split. A fan of ``k`` pieces divides the skin angle opposite the edge (in each of its
+    two skin triangles) into ``k``: ``k`` is at most that angle over ``min_fan_angle``
+    degrees, so no skin triangle is fanned into slivers (near the sharp leading or trailing
+    edge of a full-chord rib the height drops to zero and the old rule split the chain edges
+    into up to 16 pieces: skin angles of 3 degrees that no later stage could repair).
+    Returns the updated ``(P, F, C, FE, FID)``; the members' sides get the new vertices
+    (call ``sync_sides`` afterwards)."""
     for _ in range(rounds):
         # ------------------------------------------------ candidates, per member side
         cm, cw, ci, ck = [], [], [], []
@@ -1138,6 +1180,14 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
             raise ImprintError(f"member '{mems[cm[bad]].name}': chain edge {a_[bad]}-{b_[bad]} is not an edge between "
                                "two skin triangles; imprint the member again")
         f0, f1 = o[lo] // 3, o[lo + 1] // 3
+        # a fan of k pieces splits the skin angle opposite the edge into k: no fan angle below
+        # min_fan_angle (or, when that angle is already smaller, no split at all)
+        apex = np.minimum(_opposite_angle(P, F[f0], a_, b_), _opposite_angle(P, F[f1], a_, b_))
+        ck = np.minimum(ck, np.floor(apex / min_fan_angle)).astype(np.int64)
+        keep_c = ck >= 2
+        cm, cw, ci, ck, a_, b_, f0, f1 = (x[keep_c] for x in (cm, cw, ci, ck, a_, b_, f0, f1))
+        if not len(cm):
+            break
         # face-disjoint subset: a candidate is taken when it is the first to claim both its faces
         idx = np.arange(len(cm))
         owner = np.full(len(F), len(cm))
@@ -1393,6 +1443,7 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
     P = skin.points.copy()
     mems = _gather(skin, chains, infos, tol)
     _orient(mems, P)
+    _check_loop_corners(mems, P)
     _check_member_pairs(mems, [m.loop if m.loop is not None else np.concatenate([m.upper, m.lower[::-1]])
                                for m in mems], P, set(), eps, crossing=False)
     junctions = _find_junctions(mems, P, diag)

@@ -228,12 +228,14 @@ def stage_layout(state: PipelineState, layout) -> PipelineState:
 
 
 def stage_project(state: PipelineState) -> PipelineState:
-    """Cast every member's seed points onto the input skin and derive the curves to imprint."""
+    """Cast every member's seed points onto the input skin and derive the curves to imprint;
+    refuse spars too thin for the element size (:func:`~shellmesh_mdao.project.check_member_heights`)."""
     from .imprint import chain_specs
-    from .project import project_layout
+    from .project import check_member_heights, project_layout
 
     _need(state, "project")
     projected = project_layout(state.locator, state.layout)
+    check_member_heights(state.locator, state.layout, state.size)
     return state.but(projected=projected, specs=chain_specs(state.layout, projected), stage="project")
 
 

@@ -443,11 +443,36 @@ def _tri_normals(locator: SurfaceLocator, tri: np.ndarray) -> np.ndarray:
     return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
 
+def _is_full_chord(m) -> bool:
+    """A rib bounded by the leading and trailing edge (its wing has fewer than two spars)."""
+    return m.kind == "rib" and not m.bound_planes
+
+
+def _outline_ends(locator: SurfaceLocator, seeds, up_p, lo_p, up_t, lo_t) -> None:
+    """Project the two end seeds of a full-chord rib in place.
+
+    Those ends are the wing-box corners' leading- and trailing-edge points ``S(eta, 0)`` and
+    ``S(eta, 1)``: they lie ON the skin's outline (the manifest's corners are edge points),
+    where the ``+-up`` rays start on the surface and graze it, so they hit or miss by
+    rounding. An end's projection is the closest skin point instead (the point where the
+    upper and lower skins meet), for both sides. Only the middle seed of a full-chord rib
+    picks its section loop (:func:`~shellmesh_mdao.imprint.chain_specs`); its interior seeds
+    still have to hit the skin along ``+-up``, so a rib outside the wing is still refused."""
+    ends = np.array([0, len(seeds) - 1])
+    cp, tri, _ = locator.closest(seeds[ends])
+    up_p[ends] = cp
+    lo_p[ends] = cp
+    up_t[ends] = tri
+    lo_t[ends] = tri
+
+
 def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
     """Project every member of ``layout`` (a :class:`~shellmesh_mdao.layout.Layout`, a dict
     or a path) onto the skin: ``{member name: ProjectedMember}`` in :meth:`Layout.members`
     order. Wing members cast ``n_seeds`` points of their chord-plane curve along
-    ``+/-up``; explicit members project their upper and lower polylines."""
+    ``+/-up`` (a full-chord rib's two end points, which lie on the skin's leading and
+    trailing edge, go to their closest skin point instead); explicit members project their
+    upper and lower polylines."""
     from .layout import load_layout
     lay = load_layout(layout)
     out = {}
@@ -464,11 +489,13 @@ def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
         off = np.concatenate([[0], np.cumsum(cnt)])
         for i, m in enumerate(wing_specs):
             sl = slice(off[i], off[i + 1])
-            up_t, lo_t = ti[:n][sl], ti[n:][sl]
+            up_p, lo_p = hp[:n][sl].copy(), hp[n:][sl].copy()
+            up_t, lo_t = ti[:n][sl].copy(), ti[n:][sl].copy()
+            if _is_full_chord(m):
+                _outline_ends(locator, seeds[i], up_p, lo_p, up_t, lo_t)
             if (up_t < 0).any() or (lo_t < 0).any():
                 project_wing_stations(locator, m, seeds[i], name=m.name)  # raises with the details
-            out[m.name] = ProjectedMember(m.name, m.kind, seeds[i], hp[:n][sl].copy(), hp[n:][sl].copy(),
-                                          up_t.copy(), lo_t.copy())
+            out[m.name] = ProjectedMember(m.name, m.kind, seeds[i], up_p, lo_p, up_t, lo_t)
     for m in specs:
         if m.kind != "explicit":
             continue
@@ -478,3 +505,46 @@ def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
                                       lower_seeds=m.lower.copy(), upper_normal=_tri_normals(locator, up_t),
                                       lower_normal=_tri_normals(locator, lo_t))
     return {m.name: out[m.name] for m in specs}
+
+
+#: a spar web must be at least this many element sizes tall everywhere along it
+MIN_MEMBER_HEIGHT = 0.3
+
+
+def check_member_heights(locator: SurfaceLocator, layout, size: float, n: int = 21) -> dict:
+    """Height of every spar web (distance between its upper and lower skin hits along
+    ``+-up``, at ``n`` points strictly between the first and the last rib plane: at its ends
+    a spar meets the outermost ribs, which may cut a rounded tip cap) against the element
+    ``size``. Returns ``{spar name: (min height, point of the min)}``; raises
+    :class:`LayoutError` when a spar is less than :data:`MIN_MEMBER_HEIGHT` element sizes tall
+    somewhere (a spar close to the trailing or leading edge of a thin wing): a web thinner
+    than that cannot be meshed with quads of that size without slivers. Bounded ribs end on
+    the spars, so their smallest heights are the spars'; full-chord ribs close at the edges
+    by design and are not checked."""
+    from .errors import LayoutError
+    from .layout import load_layout
+    lay = load_layout(layout)
+    spars = [m for m in lay.members() if m.kind == "spar"]
+    if not spars:
+        return {}
+    seeds = np.stack([m.seed_points(n + 2)[1:-1] for m in spars])            # (s, n, 3), ends excluded
+    ups = np.repeat(np.stack([m.up for m in spars]), n, axis=0)
+    o = seeds.reshape(-1, 3)
+    hp, ti, _ = locator.raycast(np.vstack([o, o]), np.vstack([ups, -ups]))
+    k = len(o)
+    ok = (ti[:k] >= 0) & (ti[k:] >= 0)
+    height = np.where(ok, np.einsum("ij,ij->i", hp[:k] - hp[k:], ups), np.inf).reshape(len(spars), n)
+    out = {}
+    for i, m in enumerate(spars):
+        j = int(np.argmin(height[i]))
+        out[m.name] = (float(height[i, j]), o[i * n + j].copy())
+    for m in spars:
+        h, p = out[m.name]
+        if h < MIN_MEMBER_HEIGHT * size:
+            edge = "trailing" if m.parameter > 0.5 else "leading"
+            raise LayoutError(
+                f"spar '{m.name}' (c={m.parameter:g}) is only {h:.4g} tall near {_fmt_points(p[None], [0])}, "
+                f"{h / size:.2f} element sizes (at least {MIN_MEMBER_HEIGHT:g} needed): the wing is too thin "
+                f"there for a web of quads of size {size:g}; move the spar away from the {edge} edge or use an "
+                f"element size below {h / MIN_MEMBER_HEIGHT:.4g}")
+    return out

@@ -95,6 +95,15 @@ def test_classifier_on_known_messages(manifest, geometry_dir):
     r = SL.run_case(case, geometry_dir, manifest)
     assert r["outcome"] == "invalid layout" and r["stage"] == "layout", r
     assert r["error"].startswith("LayoutError: ribs ") and "ribs closer than the element size" in r["reason"]
+    # a spar web lower than 0.3 element sizes (straight wing, c=0.03: 0.0036 tall at size 0.02) is refused by
+    # the project stage, and the independent ray casts agree that the web is low (tight)
+    case = dict(case, ribs=[0.0, 0.5, 1.0], spars=[0.03, 0.5])
+    t = SL.layout_tightness(manifest, case, geometry_dir)
+    assert 0.1 < t["spar_height"] < 0.25 and "a spar web 0." in t["tight"]
+    r = SL.run_case(case, geometry_dir, manifest)
+    assert r["outcome"] == "invalid layout" and r["stage"] == "project", r
+    assert r["error"].startswith("LayoutError: spar 'wing/spar_0' (c=0.03) is only") and "spar web" in r["reason"]
+    assert SL.classify_refusal("LayoutError", r["error"].split(": ", 1)[1], "project", dict(t, tight=""))[0] == "FAIL"
 
 
 @pytest.mark.slow

@@ -1,0 +1,153 @@
+"""Full-chord ribs (a wing with fewer than two spars: each rib is one closed loop around the
+section, leading edge to trailing edge), issue 8.
+
+* projection: the loop's end seeds are the wing-box corners' leading/trailing-edge points,
+  which lie ON the skin, so the +-up rays from them graze it; they now go to their closest
+  skin point (cessna210 root rib, stress sweep seeds 33/41/89: used to raise ProjectionError);
+* thin wedges: ``split_thin`` used to split the loop's chain edges near a sharp edge into up
+  to 16 pieces, fanning the skin triangles there (skin angles down to 3 degrees, scaled
+  Jacobian 0.05); a fan now keeps at least 15 degrees of the skin angle per piece;
+* end to end on the stress sweep's draws (slow): swept_wing seed 3 meets every guarantee;
+* a sharp edge: the straight wing's leading edge is a 6.9-degree wedge, where no quad can have
+  a scaled Jacobian above sin(6.9 deg) = 0.12; full-chord ribs through it are refused with a
+  documented LayoutError (stress seed 42 used to leave one such quad per rib).
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shellmesh_mdao import pipeline as pl
+from shellmesh_mdao.errors import ProjectionError
+from shellmesh_mdao.imprint import chain_specs, imprint_chains
+from shellmesh_mdao.layout import layout_from_manifest
+from shellmesh_mdao.members import _split_thin_chain_edges
+from shellmesh_mdao.project import SurfaceLocator, project_layout, project_wing_stations
+from shellmesh_mdao.quality import element_quality
+
+from test_pipeline import check_guarantees
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "run_scripts"))
+import stress_layouts as SL  # noqa: E402
+
+
+def _surface(geometry_dir, manifest, name):
+    st = pl.stage_load(geometry_dir / manifest["geometries"][name]["file"], SL.BASE_SIZES[name])
+    return st
+
+
+def test_full_chord_root_rib_projects(geometry_dir, manifest):
+    """cessna210, one spar, a rib at eta 0.0102 (stress seed 33): its leading- and trailing-edge
+    seeds lie on the skin, the rays from them miss; the projection takes their closest skin
+    points and the rib's loop is imprinted closed."""
+    lay = layout_from_manifest(manifest, "cessna210", ribs=[0.0102, 0.5, 0.8501], spars=[0.73])
+    st = _surface(geometry_dir, manifest, "cessna210")
+    loc = st.locator
+    rib = next(m for m in lay.members() if m.name == "right_wing/rib_0")
+    seeds = rib.seed_points(5)
+    # the cause: the end seeds are on the skin (closest distance ~0) and the rays graze it
+    _, _, d = loc.closest(seeds[[0, -1]])
+    assert d.max() <= 1e-4 * loc.diagonal
+    with pytest.raises(ProjectionError, match="rays miss the skin"):
+        project_wing_stations(loc, rib, seeds, name=rib.name)
+    pr = project_layout(loc, lay)
+    pm = pr["right_wing/rib_0"]
+    assert (pm.upper_tri >= 0).all() and (pm.lower_tri >= 0).all()
+    # ends: the closest skin point, the same for both sides
+    assert np.array_equal(pm.upper[[0, -1]], pm.lower[[0, -1]])
+    assert np.linalg.norm(pm.upper[[0, -1]] - seeds[[0, -1]], axis=1).max() <= 1e-4 * loc.diagonal
+    # interior seeds still ray-cast: upper above lower
+    up = rib.up
+    assert ((pm.upper[1:-1] - pm.lower[1:-1]) @ up > 0).all()
+    specs = [s for s in chain_specs(lay, pr) if s.member == "right_wing/rib_0"]
+    assert [s.side for s in specs] == ["loop"]
+    P, T = st.surface.points, st.surface.faces[:, :3]
+    _, res = imprint_chains(st.surface, P, T, specs, locator=loc)
+    assert res[0].arc.closed and len(res[0].vertices) >= 10
+
+
+def test_rib_outside_the_wing_still_refused(geometry_dir, manifest):
+    """Only the two outline ends are exempt: a full-chord rib beyond the tip still raises."""
+    lay = layout_from_manifest(manifest, "swept_wing", ribs=[0.2, 0.6], spars=[0.4])
+    st = _surface(geometry_dir, manifest, "swept_wing")
+    w = lay.wings[0]
+    import dataclasses
+    far = dataclasses.replace(w, tip_le=tuple(np.add(w.tip_le, (0, 0, 1.0))),
+                              tip_te=tuple(np.add(w.tip_te, (0, 0, 1.0))))
+    bad = dataclasses.replace(lay, wings=(far,) + lay.wings[1:])
+    with pytest.raises(ProjectionError, match="rays miss the skin"):
+        project_layout(st.locator, bad)
+
+
+def _fan_case():
+    """A flat strip: a thin member side (chain 0-1, opposite chain far below it) whose chain
+    edge is long; the two skin triangles on it have apex angles ~53 and ~8 degrees."""
+    from types import SimpleNamespace
+
+    P = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 1.0, 0], [0.5, -7.0, 0]])
+    F = np.array([[0, 1, 2], [1, 0, 3]])
+    C = np.zeros(2, np.int32)
+    FE = np.array([[0, 1]])
+    FID = np.zeros(1, np.int32)
+    arc = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    other = np.array([[0.0, -0.05, 0], [1.0, -0.05, 0]])
+    m = SimpleNamespace(sides=[np.array([0, 1]), np.array([4, 5])], side_arcs=[arc, None], name="m")
+    P = np.vstack([P, other])
+    return P, F, C, FE, FID, m
+
+
+def test_split_thin_limits_fans():
+    """A chain edge 20x longer than the member height wants 14 pieces; the skin angle opposite
+    it is ~8 degrees on one side, so it is not split (the old rule fanned it into 14 triangles
+    of under 1 degree); with a 53-degree apex on both sides it is split into 3 pieces, every
+    fan triangle keeping 15 degrees."""
+    P, F, C, FE, FID, m = _fan_case()
+    P2, F2, *_ = _split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1)
+    assert len(P2) == len(P) and np.array_equal(F2, F)
+    P[3] = [0.5, -1.0, 0]                                   # apex angles ~53 degrees on both sides
+    P3, F3, *_ = _split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1)
+    k = len(F3) // 2
+    assert k == 3                                           # floor(53.1 / 15)
+    ang = element_quality(P3, F3)["min_angle"]
+    assert ang.min() >= 15.0 and len(P3) == len(P) + k - 1
+
+
+def _run_draw(geometry_dir, manifest, seed, geometry):
+    c = SL.draw_case(seed, geometry, manifest=manifest)
+    lay = layout_from_manifest(manifest, geometry, ribs=list(c["ribs"]), spars=list(c["spars"]))
+    res = pl.run_pipeline(geometry_dir / manifest["geometries"][geometry]["file"], lay, c["size"], progress=False)
+    return c, res
+
+
+@pytest.mark.slow
+def test_swept_wing_seed3(geometry_dir, manifest):
+    """Stress seed 3 (3 ribs, one spar at 0.474, size 0.0194): was 36 poor elements (min 0.049)
+    beside the ribs near the thin trailing edge."""
+    c, res = _run_draw(geometry_dir, manifest, 3, "swept_wing")
+    assert len(c["spars"]) == 1
+    check_guarantees(res)
+
+
+@pytest.mark.slow
+def test_full_chord_rib_through_a_sharp_edge_is_refused(geometry_dir, manifest):
+    """The straight wing's leading edge is a 6.9-degree wedge: a full-chord rib (one spar) has a
+    corner that sharp, where no quad can have a scaled Jacobian above sin(6.9 deg) = 0.12 (stress
+    seed 42 left one such quad per rib). The members stage refuses it, naming the rib, the corner
+    and the fix; the sweep's independent section check agrees that the layout is tight."""
+    from shellmesh_mdao.errors import LayoutError
+    lay = layout_from_manifest(manifest, "straight_wing", ribs=[0.2, 0.5, 0.8], spars=[0.5])
+    with pytest.raises(LayoutError, match=r"member 'wing/rib_0' cuts a sharp edge of the skin: its outline has a "
+                                          r"[5-9]\.\d deg corner at \[-0.75, .*below the 0.2 guarantee at any "
+                                          r"element size; end the rib on spars"):
+        pl.run_pipeline(geometry_dir / "straight_wing.stl", lay, 0.05, until="members", progress=False)
+    t = SL.layout_tightness(manifest, {"geometry": "straight_wing", "ribs": [0.2, 0.5, 0.8], "spars": [0.5],
+                                       "size": 0.05}, geometry_dir)
+    assert 6.0 < t["wedge"] < 8.0 and "full-chord rib section" in t["tight"]
+    # with two spars the ribs end on them: no loop, no sharp corner
+    lay2 = layout_from_manifest(manifest, "straight_wing", ribs=[0.2, 0.5, 0.8], spars=[0.3, 0.6])
+    res = pl.run_pipeline(geometry_dir / "straight_wing.stl", lay2, 0.05, until="members", progress=False)
+    assert res.stage == "members"
