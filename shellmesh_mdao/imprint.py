@@ -573,11 +573,11 @@ def _arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps):
     vertex there. Arc points are exact points of input edges, so the test is exact."""
     if not len(skin.feature_edges) or not (skin.feature_edge_ids < 0).any():
         return []
-    lines = ShellMesh(surface_points, surface_tris).sharp_edges()
-    if not len(lines):
+    a, b = kept_sharp_segments(surface_points, surface_tris, skin.points,
+                               skin.feature_edges[skin.feature_edge_ids < 0], eps)
+    if not len(a):
         return []
     out = []
-    a, b = surface_points[lines[:, 0]], surface_points[lines[:, 1]]
     for arc in arcs:
         pts = arc.points if arc.closed else arc.points[1:-1]
         if not len(pts):
@@ -586,6 +586,96 @@ def _arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps):
         if len(x):
             out.append(x)
     return out
+
+
+def _segment_hits(q, a, b, eps):
+    """Every (point, segment) pair with point ``q[i]`` within ``eps`` of segment ``a[j]-b[j]``:
+    ``(i, j, t)`` with ``t`` the parameter of the closest point along the segment."""
+    tree = cKDTree(0.5 * (a + b))
+    reach = 0.5 * np.linalg.norm(b - a, axis=1).max() + eps
+    cand = tree.query_ball_point(q, reach)
+    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
+    if not cnt.sum():
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    qi = np.repeat(np.arange(len(q)), cnt)
+    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
+    ab = b[si] - a[si]
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab) / np.where(L2 > 0, L2, 1.0), 0, 1)
+    d = np.linalg.norm(a[si] + t[:, None] * ab - q[qi], axis=1)
+    ok = d <= eps
+    return qi[ok], si[ok], t[ok]
+
+
+def kept_sharp_segments(surface_points: np.ndarray, surface_tris: np.ndarray, skin_points: np.ndarray,
+                        crease_edges: np.ndarray, eps: float):
+    """The pieces of the input surface's sharp edges that the skin's feature lines follow.
+
+    Remeshing keeps a sharp line of the input as a chain of skin edges (``crease_edges``,
+    their vertices exactly on the input's sharp edges) except where it drops it: the weaker of
+    two creases closer than twice the chordal tolerance (a coarsely faceted leading edge's
+    narrow nose strip, a wedge at a sharp trailing-edge tip) and the outlines of thin patches.
+    The input's sharp edges are cut at every skin crease vertex lying on them; a stretch
+    between such cuts is kept when a skin crease edge joins two skin vertices bounding that
+    same stretch. Returns ``(a, b)``: the kept pieces as segments (k, 3) each. Vectorised;
+    exact (no distance tolerance beyond ``eps`` for "vertex on an input edge")."""
+    empty = (np.zeros((0, 3)), np.zeros((0, 3)))
+    lines = ShellMesh(surface_points, surface_tris).sharp_edges()
+    crease_edges = np.asarray(crease_edges, np.int64).reshape(-1, 2)
+    if not len(lines) or not len(crease_edges):
+        return empty
+    a, b = surface_points[lines[:, 0]], surface_points[lines[:, 1]]
+    sv = np.unique(crease_edges)
+    qi, si, t = _segment_hits(skin_points[sv], a, b, eps)
+    if not len(qi):
+        return empty
+    nv, ns, nq = len(surface_points), len(lines), len(qi)
+    # each input sharp edge as its start, the skin vertices on it (by t), its end
+    e_all = np.concatenate([np.arange(ns), si, np.arange(ns)])
+    t_all = np.concatenate([np.full(ns, -1.0), t, np.full(ns, 2.0)])
+    node = np.concatenate([lines[:, 0], nv + np.arange(nq), lines[:, 1]])
+    o = np.lexsort((node, t_all, e_all))
+    e_s, t_s, n_s = e_all[o], np.clip(t_all[o], 0.0, 1.0), node[o]
+    same = np.flatnonzero(e_s[1:] == e_s[:-1])
+    sa, sb, se = n_s[same], n_s[same + 1], e_s[same]
+    ta, tb = t_s[same], t_s[same + 1]
+    m = len(same)
+    # stretches: pieces connected through input vertices (skin vertices cut the lines)
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+    rows, cols = [], []
+    for end in (sa, sb):
+        real = end < nv
+        rows.append(np.flatnonzero(real))
+        cols.append(m + end[real])
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    g = sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(m + nv, m + nv))
+    _, lab = connected_components(g, directed=False)
+    lab = lab[:m]
+    # (stretch, skin vertex) pairs bounding each stretch
+    bl, bv = [], []
+    for end in (sa, sb):
+        virt = end >= nv
+        bl.append(lab[virt])
+        bv.append(sv[qi[end[virt] - nv]])
+    bl, bv = np.concatenate(bl), np.concatenate(bv)
+    nsk = int(max(len(skin_points), crease_edges.max() + 1))
+    pair = np.unique(bl.astype(np.int64) * nsk + bv)
+    pl, pv = pair // nsk, pair % nsk
+    # a stretch is kept when some skin crease edge (u, v) has both ends among its bounds
+    ov = np.argsort(pv, kind="stable")
+    pl_s, pv_s = pl[ov], pv[ov]
+    u, v = crease_edges[:, 0], crease_edges[:, 1]
+    lo, hi = np.searchsorted(pv_s, u, "left"), np.searchsorted(pv_s, u, "right")
+    idx = _ranges(lo, hi)
+    ce = np.repeat(np.arange(len(u)), hi - lo)
+    cl = pl_s[idx]
+    ok = np.isin(cl * nsk + v[ce], pair)
+    kept = np.zeros(int(lab.max()) + 1 if m else 0, bool)
+    kept[cl[ok]] = True
+    keep = kept[lab] & (tb > ta)
+    ab = b - a
+    return a[se[keep]] + ta[keep, None] * ab[se[keep]], a[se[keep]] + tb[keep, None] * ab[se[keep]]
 
 
 def _on_segments(q, a, b, eps):
@@ -875,7 +965,13 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
         n1 / np.maximum(np.linalg.norm(n1, axis=1, keepdims=True), 1e-300)
     cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1), 1e-300)
     good = (new_min > old_min + min_gain) & (cosd > np.cos(np.radians(max_dihedral)))
-    good &= (np.einsum("ij,ij->i", nn0, navg) > 0) & (np.einsum("ij,ij->i", nn1, navg) > 0)
+    # both new triangles keep the pair's orientation and stay within max_dihedral of its mean
+    # normal: a thin new triangle spanning a bend (three close vertices of one chain around a
+    # rounded leading edge) would lie in the member plane, across the skin
+    cmax = np.cos(np.radians(max_dihedral))
+    un = navg / np.maximum(np.linalg.norm(navg, axis=1, keepdims=True), 1e-300)
+    good &= np.einsum("ij,ij->i", nn0, un) > cmax * np.linalg.norm(nn0, axis=1)
+    good &= np.einsum("ij,ij->i", nn1, un) > cmax * np.linalg.norm(nn1, axis=1)
     new_key = np.minimum(r, s) * n + np.maximum(r, s)
     good &= ~np.isin(new_key, uk)
     cand = np.flatnonzero(good)
@@ -1467,6 +1563,7 @@ class _SkinPatch:
         self.locator = locator
         self.eps = 1e-9 * locator.diagonal
         self._soup = None
+        self._crease0 = (np.asarray(P).copy(), fe[np.asarray(fid) < 0])   # the lines remeshing kept
         self.journal = []
         self.region = None
         self.killed_out = []
@@ -1609,8 +1706,8 @@ class _SkinPatch:
     def on_crease(self, q):
         """Closest points on the input's sharp edges (the lines remeshing kept) and distances."""
         if self._soup is None:
-            lines = ShellMesh(self.locator.points, self.locator.triangles).sharp_edges()
-            self._soup = (self.locator.points[lines[:, 0]], self.locator.points[lines[:, 1]])
+            pts, crease = self._crease0
+            self._soup = kept_sharp_segments(self.locator.points, self.locator.triangles, pts, crease, self.eps)
         a, b = self._soup
         q = np.atleast_2d(q)
         if not len(a):

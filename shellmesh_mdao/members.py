@@ -1126,9 +1126,85 @@ def _opposite_angle(P, tri, a, b):
     return np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0)))
 
 
+def _apex(F, f, a_, b_):
+    """The corner of each face ``F[f]`` that is neither ``a_`` nor ``b_``."""
+    t = F[f]
+    return np.where((t[:, 0] != a_) & (t[:, 0] != b_), t[:, 0], np.where((t[:, 1] != a_) & (t[:, 1] != b_), t[:, 1], t[:, 2]))
+
+
+def _fan_fractions(P, a_, b_, apices, ck):
+    """Where along each edge ``a_-b_`` its ``ck - 1`` split points go (fractions, concatenated):
+    the mean over the apices of the points that divide each apex's angle into ``ck`` equal
+    parts (the ray at angle ``phi`` from ``c-a`` meets ``a-b`` at ``t = |ca| sin(phi) /
+    (|ca| sin(phi) + |cb| sin(theta - phi))``); equal pieces when the apices face the middle."""
+    nnew = ck - 1
+    rep = np.repeat(np.arange(len(ck)), nnew)
+    j = (np.arange(len(rep)) - np.repeat(np.cumsum(nnew) - nnew, nnew) + 1) / ck[rep]
+    t = np.zeros(len(rep))
+    for c in apices:
+        ca, cb = P[a_] - P[c], P[b_] - P[c]
+        la, lb = np.linalg.norm(ca, axis=1), np.linalg.norm(cb, axis=1)
+        th = np.arccos(np.clip(np.einsum("ij,ij->i", ca, cb) / np.maximum(la * lb, 1e-300), -1.0, 1.0))
+        phi = j * th[rep]
+        num = la[rep] * np.sin(phi)
+        t += num / np.maximum(num + lb[rep] * np.sin(th[rep] - phi), 1e-300)
+    return t / len(apices)
+
+
+def _fan_points(P, mems, cm, cw, a_, b_, ck, frac=None):
+    """The ``ck - 1`` points splitting each chain edge ``a_-b_`` (side ``cw`` of member ``cm``)
+    into ``ck`` pieces along the side's exact arc, concatenated edge by edge: at the arc-length
+    fractions ``frac`` (concatenated) or, by default, equal pieces."""
+    nnew = ck - 1
+    off = np.concatenate([[0], np.cumsum(nnew)[:-1]])
+    X = np.zeros((int(nnew.sum()), 3))
+    for mi, w in sorted(set(zip(cm.tolist(), cw.tolist()))):   # one arc query per member side
+        sel = np.flatnonzero((cm == mi) & (cw == w))
+        s, p, cum = _arc_param(P[np.concatenate([a_[sel], b_[sel]])], mems[mi].side_arcs[w], False)
+        sa, sb = s[:len(sel)], s[len(sel):]
+        rep = np.repeat(np.arange(len(sel)), nnew[sel])
+        j = np.arange(len(rep)) - np.repeat(np.cumsum(nnew[sel]) - nnew[sel], nnew[sel]) + 1
+        pos = np.repeat(off[sel], nnew[sel]) + j - 1
+        tpar = sa[rep] + (sb[rep] - sa[rep]) * (j / ck[sel][rep] if frac is None else frac[pos])
+        X[pos] = _arc_point(p, cum, tpar)
+    return X
+
+
+def _fan_sequences(a_, b_, ck, first):
+    """Node sequences ``a, new..., b`` of every split edge (new nodes numbered from ``first``),
+    concatenated; with each sequence's start and length."""
+    seq_len = ck + 1
+    seq_start = np.concatenate([[0], np.cumsum(seq_len)[:-1]])
+    rep = np.repeat(np.arange(len(ck)), seq_len)
+    j = np.arange(len(rep)) - seq_start[rep]
+    seq = np.where(j == 0, a_[rep], np.where(j == ck[rep], b_[rep], first[rep] + j - 1))
+    return seq, seq_start, seq_len
+
+
+def _fan_min_angles(P, F, mems, cm, cw, a_, b_, f0, f1, ck):
+    """Smallest angle of the fan triangles that splitting each chain edge ``a_-b_`` into ``ck``
+    pieces would make in its two skin faces ``f0``, ``f1``."""
+    c0, c1 = _apex(F, f0, a_, b_), _apex(F, f1, a_, b_)
+    X = _fan_points(P, mems, cm, cw, a_, b_, ck, _fan_fractions(P, a_, b_, (c0, c1), ck))
+    Q = np.vstack([P, X])
+    first = len(P) + np.concatenate([[0], np.cumsum(ck - 1)[:-1]])
+    seq, seq_start, seq_len = _fan_sequences(a_, b_, ck, first)
+    e_of = np.repeat(np.arange(len(ck)), ck)
+    jj = np.arange(len(e_of)) - np.repeat(np.cumsum(ck) - ck, ck)
+    s0 = seq[seq_start[e_of] + jj]
+    s1 = seq[seq_start[e_of] + jj + 1]
+    worst = np.full(len(ck), np.inf)
+    for f in (f0, f1):
+        t = F[f]
+        c = np.where((t[:, 0] != a_) & (t[:, 0] != b_), t[:, 0], np.where((t[:, 1] != a_) & (t[:, 1] != b_), t[:, 1], t[:, 2]))
+        ang = _tri_min_angles(Q, np.stack([s0, s1, c[e_of]], 1))
+        np.minimum.at(worst, e_of, ang)
+    return worst
+
+
 def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, max_pieces: int = 16,
                             min_piece: float = 0.02, min_height: float = 0.1, rounds: int = 3,
-                            min_fan_angle: float = 15.0):
+                            min_fan_angle: float = 15.0, min_skin_angle: float = 10.0):
     """Split chain edges that are long compared with the member's local height.
 
     Where a member is thinner than its chain spacing (the spars of a thin wing), no
@@ -1142,7 +1218,13 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
     two skin triangles) into ``k``: ``k`` is at most that angle over ``min_fan_angle``
     degrees, so no skin triangle is fanned into slivers (near the sharp leading or trailing
     edge of a full-chord rib the height drops to zero and the old rule split the chain edges
-    into up to 16 pieces: skin angles of 3 degrees that no later stage could repair).
+    into up to 16 pieces: skin angles of 3 degrees that no later stage could repair). The
+    split points divide each skin face's apex angle evenly (the mean of the two faces' points)
+    rather than the edge: with an apex off to one side (an obtuse skin corner at a chain
+    vertex, common where a full-chord rib meets a spar) equal pieces leave a sliver of that
+    angle in the far piece. Then ``k`` drops until no fan triangle has an angle below the
+    smaller of ``min_skin_angle`` (the imprint's own floor) and the smallest angle of the face
+    it replaces.
     Returns the updated ``(P, F, C, FE, FID)``; the members' sides get the new vertices
     (call ``sync_sides`` afterwards)."""
     for _ in range(rounds):
@@ -1184,6 +1266,20 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
         # min_fan_angle (or, when that angle is already smaller, no split at all)
         apex = np.minimum(_opposite_angle(P, F[f0], a_, b_), _opposite_angle(P, F[f1], a_, b_))
         ck = np.minimum(ck, np.floor(apex / min_fan_angle)).astype(np.int64)
+        # ... but equal pieces along the edge divide that angle evenly only when the apex faces
+        # the edge's middle: the split points divide the two apex angles evenly instead (mean of
+        # the two), and fewer pieces are used until every fan triangle keeps the smaller of
+        # min_skin_angle and the smallest angle of the face it replaces.
+        floor_ang = np.minimum(min_skin_angle, np.minimum(_tri_min_angles(P, F[f0]), _tri_min_angles(P, F[f1])))
+        for _k in range(max_pieces):
+            live = np.flatnonzero(ck >= 2)
+            if not len(live):
+                break
+            worst = _fan_min_angles(P, F, mems, cm[live], cw[live], a_[live], b_[live], f0[live], f1[live], ck[live])
+            bad = live[worst < floor_ang[live] - 1e-9]
+            if not len(bad):
+                break
+            ck[bad] -= 1
         keep_c = ck >= 2
         cm, cw, ci, ck, a_, b_, f0, f1 = (x[keep_c] for x in (cm, cw, ci, ck, a_, b_, f0, f1))
         if not len(cm):
@@ -1198,23 +1294,10 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
         # ------------------------------------------------ new points on the exact arcs
         nnew = ck - 1
         first = len(P) + np.concatenate([[0], np.cumsum(nnew)[:-1]])
-        X = np.zeros((int(nnew.sum()), 3))
-        off = first - len(P)
-        for mi, w in sorted(set(zip(cm.tolist(), cw.tolist()))):   # one arc query per member side
-            sel = np.flatnonzero((cm == mi) & (cw == w))
-            s, p, cum = _arc_param(P[np.concatenate([a_[sel], b_[sel]])], mems[mi].side_arcs[w], False)
-            sa, sb = s[:len(sel)], s[len(sel):]
-            rep = np.repeat(np.arange(len(sel)), nnew[sel])
-            j = np.arange(len(rep)) - np.repeat(np.cumsum(nnew[sel]) - nnew[sel], nnew[sel]) + 1
-            tpar = sa[rep] + (sb[rep] - sa[rep]) * j / ck[sel][rep]
-            pos = np.repeat(off[sel], nnew[sel]) + j - 1
-            X[pos] = _arc_point(p, cum, tpar)
+        X = _fan_points(P, mems, cm, cw, a_, b_, ck,
+                        _fan_fractions(P, a_, b_, (_apex(F, f0, a_, b_), _apex(F, f1, a_, b_)), ck))
         # ------------------------------------------------ node sequences a, new..., b of every split edge
-        seq_len = ck + 1
-        seq_start = np.concatenate([[0], np.cumsum(seq_len)[:-1]])
-        rep = np.repeat(np.arange(len(ck)), seq_len)
-        j = np.arange(len(rep)) - seq_start[rep]
-        seq = np.where(j == 0, a_[rep], np.where(j == ck[rep], b_[rep], first[rep] + j - 1))
+        seq, seq_start, seq_len = _fan_sequences(a_, b_, ck, first)
         # ------------------------------------------------ fans replacing the two faces
         new_faces, new_C = [], []
         for f in (f0, f1):
