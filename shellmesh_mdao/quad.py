@@ -20,14 +20,21 @@ opposite skin), member nodes onto their plane, curve nodes onto their curve. Mid
 of feature edges without a curve, and of edges between faces of different supports
 that are not feature edges, are FIXED (projected onto the faces' support when there is
 one, else left at the straight midpoint).
+
+Where projecting would fold a child (a parent face spanning a crease or a rounded tip
+tighter than the element size) the fold guard first keeps the new nodes at their linear
+position; ``settle`` then projects those skin nodes after all and repairs the elements
+around them by moving vertices along their supports (:func:`~shellmesh_mdao.smooth.untangle`),
+falling back to the guarded positions only where that repair fails.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from .errors import MeshValidationError
-from .mesh import ShellMesh
-from .smooth import CURVE, FIXED, Supports, _min_corner_sj
+from .mesh import ShellMesh, vertex_faces
+from .smooth import (CURVE, FIXED, SURFACE, Supports, _face_normals, _face_quality, _faces_of, _min_corner_sj,
+                     untangle)
 
 __all__ = ["subdivide_to_quads", "subdivide_faces"]
 
@@ -61,7 +68,8 @@ def _guard_folds(P, X_lin, X_proj, children, parent, parent_normal, threshold: f
     child quad with a scaled Jacobian at or below ``threshold`` (against its own normal or its
     parent's) that the unprojected, in-plane position (``X_lin``) does not: those children's new
     nodes keep the linear position. Happens where a parent face spans a crease or a thin edge
-    tighter than the element size (the closest surface point lies across it)."""
+    tighter than the element size (the closest surface point lies across it). Returns the
+    positions and the mask of the nodes kept at their linear position."""
     n = len(P)
     is_tri = np.zeros(len(children), bool)
     nref = parent_normal[parent]
@@ -82,11 +90,53 @@ def _guard_folds(P, X_lin, X_proj, children, parent, parent_normal, threshold: f
             break
         keep_lin[fresh] = True
         X[fresh] = X_lin[fresh]
-    return X
+    return X, keep_lin
+
+
+def _settle(mesh: ShellMesh, supports: Supports, nodes, X_proj, parent_normal, threshold: float,
+            goal: float, iterations: int):
+    """Put the guarded ``nodes`` (kept at their linear position by :func:`_guard_folds`) onto
+    their supports (``X_proj``) and repair the elements around them by moving vertices along
+    their supports (:func:`~shellmesh_mdao.smooth.untangle` up to ``goal``): the tangential
+    moves of the neighbours make room for the projected nodes. Each face keeps the orientation
+    it has in the guarded mesh (its parent's where it is folded there). Where the repair
+    fails, an element that ends at or below ``threshold`` and below its guarded value gets its
+    vertices back at their guarded positions (repeated until no such element is left), so the
+    result is never worse than the guarded mesh below ``threshold``."""
+    Pg = mesh.points
+    F = mesh.faces
+    is_tri = mesh.is_tri
+    own = _face_normals(Pg, F, is_tri)
+    sj_g = _min_corner_sj(Pg, F, is_tri)
+    nref = np.where((sj_g > 0)[:, None], own, parent_normal)
+    Fc = np.where(F >= 0, F, F[:, :1])
+    q_g = _face_quality(Pg[Fc], is_tri, nref)
+    P1 = Pg.copy()
+    P1[nodes] = X_proj
+    m1 = ShellMesh(P1, F, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
+                   mesh.feature_edges, mesh.feature_edge_ids)
+    # the faces around the projected nodes (two rings: room for the tangential moves)
+    vptr, vface = vertex_faces(F, len(Pg))
+    region = _faces_of(vptr, vface, np.asarray(nodes, np.int64), len(F))
+    region = _faces_of(vptr, vface, np.unique(F[region][F[region] >= 0]), len(F))
+    m2, _ = untangle(m1, supports, goal=goal, iterations=iterations, faces=region, ref_normals=nref)
+    P2 = m2.points.copy()
+    while True:
+        q2 = _face_quality(P2[Fc], is_tri, nref)
+        worse = np.flatnonzero((q2 <= threshold) & (q2 < q_g - 1e-12))
+        if not len(worse):
+            break
+        v = np.unique(F[worse][F[worse] >= 0])
+        v = v[(P2[v] != Pg[v]).any(1)]
+        if not len(v):
+            break
+        P2[v] = Pg[v]
+    return P2
 
 
 def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 0.0,
-                       project: bool = True, guard_jacobian: float = 0.2) -> tuple[ShellMesh, Supports]:
+                       project: bool = True, guard_jacobian: float = 0.2, settle: bool = True,
+                       settle_iterations: int = 100) -> tuple[ShellMesh, Supports]:
     """Split every quad into 4 quads and every triangle into 3 quads (whole mesh at once).
 
     Parameters
@@ -99,6 +149,13 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
     guard_jacobian : a child whose scaled Jacobian the projection would bring to or below this
         value (and below its unprojected value) keeps its new nodes at their linear position
         (edge midpoint, face centroid) instead: no subdivision step folds an element.
+    settle : then put those guarded nodes onto their supports after all and repair the
+        elements around them by moving vertices along their supports (up to
+        ``settle_iterations`` rounds of :func:`~shellmesh_mdao.smooth.untangle` with goal
+        ``guard_jacobian + 0.1``); an element the repair cannot bring above ``guard_jacobian``
+        (and that is worse than guarded) gets its guarded vertex positions back. Default True:
+        skin nodes end on the input surface also where a parent face spans a crease or a
+        rounded tip tighter than the element size.
 
     Returns ``(quad mesh, supports)``. Node ``i < n`` keeps its index and position; edge
     ``e`` of ``mesh.topology()`` gets node ``n + e`` and face ``f`` node ``n + E + f``.
@@ -184,7 +241,9 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
             bad = np.flatnonzero(~ok)
             x[bad], _ = supports.project_kind(X_new[bad], pk[bad], pr[bad], None)
         x = np.where((pk == FIXED)[:, None], X_new, x)
-        X_new = _guard_folds(P, X_new, x, children, parent, fn, guard_jacobian)
+        X_new, kept = _guard_folds(P, X_new, x, children, parent, fn, guard_jacobian)
+        # guarded skin nodes that are off the surface (not merely rounding apart)
+        kept &= (new_kind == SURFACE) & (np.linalg.norm(x - X_new, axis=1) > 1e-9 * mesh.diagonal)
     sup = supports.extended(new_kind, new_ref)
     # feature edges of the new mesh with their curves
     ec_old = supports.curve_of_edges(fe)
@@ -195,4 +254,10 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
     # keep supports' feature-edge table aligned with the mesh's (sorted, unique) table
     sup.edge_curve = sup.curve_of_edges(out.feature_edges)
     sup.edge_pairs = out.feature_edges.copy()
+    if project and settle and len(X_new) and kept.any():
+        k = np.flatnonzero(kept)
+        pts = _settle(out, sup, n + k, x[k], fn[parent], guard_jacobian, guard_jacobian + 0.1,
+                      settle_iterations)
+        out = ShellMesh(pts, out.faces, out.component, out.component_names, out.fixed_vertices,
+                        out.feature_edges, out.feature_edge_ids)
     return out, sup

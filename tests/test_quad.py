@@ -136,3 +136,57 @@ def test_deterministic_and_errors():
     assert np.array_equal(sa.kind, sb.kind) and np.array_equal(sa.ref, sb.ref)
     with pytest.raises(MeshValidationError, match="one entry per mesh vertex"):
         subdivide_to_quads(mesh, Supports(np.zeros(3, np.int8), -np.ones(3)))
+
+
+def _stadium_section(r, ys, cap_pts):
+    """(y, z) polyline of a thin slab with a rounded edge: upper face z = r from y = ys[0] to 1,
+    a half-round of radius r about (1, 0), the lower face z = -r back."""
+    th = np.linspace(np.pi / 2, -np.pi / 2, cap_pts)
+    sec = np.array([(y, r) for y in ys] + [(1.0 + r * np.cos(t), r * np.sin(t)) for t in th]
+                   + [(y, -r) for y in ys[::-1]])
+    return sec[np.r_[True, np.linalg.norm(np.diff(sec, axis=0), axis=1) > 1e-12]]
+
+
+def _extrude(sec, nx, x0, x1, shift=None):
+    """Triangulated extrusion of a section along x; node j of row i at x_i + shift[j] * dx."""
+    k, dx = len(sec), (x1 - x0) / nx
+    sh = np.zeros(k) if shift is None else shift
+    i, j = np.meshgrid(np.arange(nx + 1), np.arange(k), indexing="ij")
+    P = np.stack([x0 + (i + sh[j]) * dx, sec[j, 0], sec[j, 1]], -1).reshape(-1, 3)
+    a = (np.arange(nx)[:, None] * k + np.arange(k - 1)[None]).ravel()
+    b = a + k
+    F = np.vstack([np.stack([a, a + 1, b + 1, -np.ones_like(a)], 1), np.stack([a, b + 1, b, -np.ones_like(a)], 1)])
+    return P, F
+
+
+def test_guarded_nodes_settle_onto_a_rounded_edge_tighter_than_the_elements():
+    """A coarse triangulation whose triangles cross a rounded edge of radius 0.03 obliquely
+    (elements about 0.3): projecting the new nodes straight onto the edge would fold children,
+    so the fold guard keeps them at their linear position, inside the slab. ``settle`` puts
+    them onto the input surface and repairs the elements around them along the surface:
+    every skin node ends on the input, every child above the guard's scaled Jacobian, none
+    flipped."""
+    Pf, Ff = _extrude(_stadium_section(0.03, np.linspace(0, 1, 41), 33), 80, -0.3, 1.5)
+    loc = SurfaceLocator(Pf, Ff[:, :3])
+    sec = _stadium_section(0.03, [0.0, 0.3, 0.6, 0.9], 2)
+    shift = np.where(np.arange(len(sec)) >= len(sec) // 2, -0.5, 0.0)          # lower face staggered
+    mesh = ShellMesh(*_extrude(sec, 6, 0.0, 1.2, shift))
+    assert scaled_jacobian(mesh.points, mesh.faces).min() > 0.5
+    sup = derive_supports(mesh, loc)
+    tol = 1e-9 * mesh.diagonal
+    guarded, gs = subdivide_to_quads(mesh, sup, settle=False)
+    dg = gs.distance(guarded.points)[gs.kind == SURFACE]
+    assert (dg > tol).sum() >= 10 and dg.max() > 0.01                    # the guard alone: nodes inside
+    out, osup = subdivide_to_quads(mesh, sup)
+    assert np.array_equal(out.faces, guarded.faces) and out.check().ok
+    d = osup.distance(out.points)
+    assert d[osup.kind == SURFACE].max() <= tol                           # all skin nodes on the input
+    assert loc.closest(out.points[osup.kind == SURFACE])[2].max() <= tol
+    assert np.array_equal(out.points[osup.kind == FIXED], guarded.points[gs.kind == FIXED])
+    sj = scaled_jacobian(out.points, out.faces)
+    assert sj.min() > 0.2 and sj.min() >= scaled_jacobian(guarded.points, guarded.faces).min() - 0.1
+    # no child flipped against its parent
+    parent_n = mesh.face_normals()[np.repeat(np.arange(mesh.n_faces), 3)]
+    assert ((out.face_normals() * parent_n).sum(1) > 0).all()
+    again, _ = subdivide_to_quads(mesh, sup)
+    assert np.array_equal(again.points, out.points)                        # deterministic

@@ -272,3 +272,43 @@ def test_thin_trailing_edge_never_jumps_to_the_opposite_skin():
     assert ((tn * vn).sum(1) > 0).all()
     assert (scaled_jacobian(out.points, out.faces) > 0).all()
     assert res.quality_after["n_sj_le_0.2"] <= res.quality_before["n_sj_le_0.2"]
+
+
+def test_untangle_unfolds_along_the_supports():
+    """A 4x4 grid on the curved skin z = 0.2 sin x with two interior nodes thrown across their
+    neighbours (folded elements): untangle moves vertices along the skin until every element
+    is above the goal; the open boundary (fixed) does not move, every node stays on the input
+    surface, no element ends flipped, the result is deterministic; with ``faces`` it repairs
+    only the listed elements' neighbourhood."""
+    from shellmesh_mdao.smooth import untangle
+    _, loc, _, _ = t_mesh()
+    P, F, idx = grid(4, 4, sx=2.0, sy=2.0)
+    P[:, 2] = 0.2 * np.sin(P[:, 0])
+    mesh0 = ShellMesh(P, F)
+    sup = derive_supports(mesh0, loc)
+    ref = mesh0.face_normals()
+    bad = P.copy()
+    for a, b in ((idx[1, 1], idx[2, 2]), (idx[3, 2], idx[2, 1])):        # past the diagonal neighbour
+        bad[a] = P[a] + 1.3 * (P[b] - P[a])
+    bad[:, 2] = 0.2 * np.sin(bad[:, 0])
+    mesh = ShellMesh(bad, F)
+    assert scaled_jacobian(mesh.points, mesh.faces).min() < 0
+    out, info = untangle(mesh, sup, goal=0.3, ref_normals=ref)
+    sj = scaled_jacobian(out.points, out.faces)
+    assert sj.min() > 0.3 and info["n_bad_after"] == 0 and info["n_bad_before"] >= 4
+    assert info["min_before"] < 0 < 0.3 < info["min_after"]
+    assert ((out.face_normals() * ref).sum(1) > 0).all()
+    fixed = sup.kind == FIXED
+    assert fixed.sum() == 16 and np.array_equal(out.points[fixed], bad[fixed])
+    assert sup.distance(out.points).max() <= 1e-9 * out.diagonal
+    again, _ = untangle(mesh, sup, goal=0.3, ref_normals=ref)
+    assert np.array_equal(again.points, out.points)
+    # only the faces around the first node: the second fold is left (and gets no worse)
+    near = np.flatnonzero((F == idx[1, 1]).any(1))
+    part, pinfo = untangle(mesh, sup, goal=0.3, ref_normals=ref, faces=near)
+    sjp = scaled_jacobian(part.points, part.faces)
+    assert sjp[near].min() > 0.3 and pinfo["n_bad_after"] == 0
+    far = np.flatnonzero((F == idx[3, 2]).any(1))
+    assert 0 > sjp[far].min() >= scaled_jacobian(mesh.points, mesh.faces)[far].min() - 1e-12
+    with pytest.raises(MeshValidationError, match="untangle needs Supports"):
+        untangle(mesh, Supports(np.zeros(3, np.int8), -np.ones(3)))
