@@ -24,23 +24,11 @@ import stress_layouts as SL
 
 CI_SIZE_FACTORS = (1.4, 2.8)
 
-#: measured FAILs of the package on the CI draws (07:25 UTC 2026-11-22), kept as strict xfails:
-#: the run returns a mesh below the quality guarantee instead of meshing it or refusing it with a
-#: documented error. Strict: when the package is fixed they XPASS and the mark must go.
-KNOWN_FAILS = {
-    "cessna210": "package bug: cessna210 seed 1 (11 ribs incl. 0 and 1, spars 0.161/0.513/0.903, size 0.6764 = "
-                 "2.7x): 118 elements with scaled Jacobian <= 0.2 (min 0.066), the pipeline warns and returns them; "
-                 "tight layout (aft spar 0.58 h from the trailing edge, tip rib 0.40 h from the tip) but accepted "
-                 "by the validator; half of the poor elements lie beyond the tip rib, most others in the strip "
-                 "between the aft spar and the trailing edge (c 0.92-0.96)",
-    "straight_wing": "package bug: straight_wing seed 2 (6 ribs 0.1337..0.7054, spars 0.096/0.289, size 0.03444 = "
-                     "1.7x): 1 element with scaled Jacobian 0.181 <= 0.2 on a loose layout (every gap >= 2.5 h), in the "
-                     "skin just root-side of rib_0 (eta 0.127, c 0.13) next to the rib_0 / spar_0 corner",
-    "swept_wing": "package bug: swept_wing seed 3 (ribs 0.0276/0.6886/0.7934, one spar 0.474, size 0.03299 = "
-                  "1.65x): 36 elements with scaled Jacobian <= 0.2 (min 0.049) on a loose layout (every gap >= 2 h), "
-                  "beside ribs 1 and 2 at c 0.70-0.74; one spar means full-chord ribs: the same ribs and size "
-                  "with spars 0.15/0.65 or 0.3/0.474 pass (min SJ 0.335)",
-}
+#: measured FAILs of the package on the CI draws, kept as strict xfails (a run returning a mesh below the
+#: quality guarantee instead of meshing it or refusing it with a documented error): none since 2026-11-22
+#: 09:20 UTC (cessna210 seed 1 is refused for its 0.15-element spar web, straight_wing seed 2 and swept_wing
+#: seed 3 mesh with min SJ 0.300 / 0.249). Strict: a fixed package XPASSes and the mark must go.
+KNOWN_FAILS: dict = {}
 CI_CASES = [pytest.param(i, g, id=g, marks=[pytest.mark.xfail(strict=True, reason=KNOWN_FAILS[g])]
                          if g in KNOWN_FAILS else []) for i, g in enumerate(SL.GEOMETRIES)]
 
