@@ -58,9 +58,10 @@ class PipelineOptions:
                           ``final_iterations`` after it.
     ``guard_jacobian``    a subdivided element whose projected new nodes would bring its scaled
                           Jacobian to or below this keeps them at their linear position.
-    ``smooth_energy``     energy of both smoothing passes: ``"length"`` (sum of edge lengths) or
-                          ``"squared"`` (edges aim at the target length: twice ``size`` before
-                          subdivision, ``size`` after); see :func:`~shellmesh_mdao.smooth.smooth`.
+    ``smooth_energy``     energy of both smoothing passes: ``"squared"`` (default: edges aim at the
+                          target length, twice ``size`` before subdivision, ``size`` after) or
+                          ``"length"`` (sum of edge lengths, scale-free); see
+                          :func:`~shellmesh_mdao.smooth.smooth` and docs/optimisation.md.
     ``smooth_jacobian``   no smoothing step before subdivision may bring an element to or below
                           this scaled Jacobian (nor lower one already below it).
     """
@@ -75,7 +76,7 @@ class PipelineOptions:
     final_iterations: int = 10
     guard_jacobian: float = 0.2
     smooth_jacobian: float = 0.4
-    smooth_energy: str = "length"
+    smooth_energy: str = "squared"
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "PipelineOptions":
@@ -97,7 +98,7 @@ class PipelineOptions:
                 raise ShellMeshError(f"solver option {k!r} must be a {typ.__name__}, got {v!r}") from None
             if typ in (int, float) and not (np.isfinite(out[k]) and out[k] >= 0):
                 raise ShellMeshError(f"solver option {k!r} must be a finite non-negative number, got {v!r}")
-        if out.get("smooth_energy", "length") not in ("length", "squared"):
+        if out.get("smooth_energy", "squared") not in ("length", "squared"):
             raise ShellMeshError(f"solver option 'smooth_energy' must be 'length' or 'squared', got "
                                  f"{out['smooth_energy']!r}")
         return cls(**out)
