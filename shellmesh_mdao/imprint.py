@@ -680,19 +680,8 @@ def kept_sharp_segments(surface_points: np.ndarray, surface_tris: np.ndarray, sk
 
 def _on_segments(q, a, b, eps):
     """Points of q within eps of any segment a-b."""
-    tree = cKDTree(0.5 * (a + b))
-    reach = 0.5 * np.linalg.norm(b - a, axis=1).max() + eps
-    cand = tree.query_ball_point(q, reach)
-    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
-    if not cnt.sum():
-        return np.zeros((0, 3))
-    qi = np.repeat(np.arange(len(q)), cnt)
-    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
-    ab = b[si] - a[si]
-    L2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab) / np.where(L2 > 0, L2, 1.0), 0, 1)
-    d = np.linalg.norm(a[si] + t[:, None] * ab - q[qi], axis=1)
-    return q[np.unique(qi[d <= eps])]
+    qi, _, _ = _segment_hits(q, a, b, eps)
+    return q[np.unique(qi)] if len(qi) else np.zeros((0, 3))
 
 
 def _arc_crossings(chains, arcs, eps):
