@@ -1181,11 +1181,14 @@ def _fan_sequences(a_, b_, ck, first):
     return seq, seq_start, seq_len
 
 
-def _fan_min_angles(P, F, mems, cm, cw, a_, b_, f0, f1, ck):
+def _fan_min_angles(P, F, mems, cm, cw, a_, b_, f0, f1, ck, frac=None):
     """Smallest angle of the fan triangles that splitting each chain edge ``a_-b_`` into ``ck``
-    pieces would make in its two skin faces ``f0``, ``f1``."""
+    pieces (at the arc fractions ``frac``, concatenated; default: dividing the apex angles
+    evenly) would make in its two skin faces ``f0``, ``f1``."""
     c0, c1 = _apex(F, f0, a_, b_), _apex(F, f1, a_, b_)
-    X = _fan_points(P, mems, cm, cw, a_, b_, ck, _fan_fractions(P, a_, b_, (c0, c1), ck))
+    if frac is None:
+        frac = _fan_fractions(P, a_, b_, (c0, c1), ck)
+    X = _fan_points(P, mems, cm, cw, a_, b_, ck, frac)
     Q = np.vstack([P, X])
     first = len(P) + np.concatenate([[0], np.cumsum(ck - 1)[:-1]])
     seq, seq_start, seq_len = _fan_sequences(a_, b_, ck, first)
@@ -1200,6 +1203,38 @@ def _fan_min_angles(P, F, mems, cm, cw, a_, b_, f0, f1, ck):
         ang = _tri_min_angles(Q, np.stack([s0, s1, c[e_of]], 1))
         np.minimum.at(worst, e_of, ang)
     return worst
+
+
+def _mirror_fractions(P, ch, other, L, thin, min_len: float, max_pieces: int):
+    """Ladder split points of the thin chain edges of one member side: the closest points on
+    the side (chain ``ch``, edge lengths ``L``) of the opposite side's vertices (``other``) that
+    fall inside an edge flagged ``thin`` and lie across the member from it (no farther than the
+    edge is long), at least ``max(min_len, 0.3 x their distance)`` from the edge's ends and from
+    each other. Returns ``(count, frac)``: points per edge and an (edges, max_pieces - 1) array
+    of arc fractions along the edge (NaN-padded, increasing)."""
+    ne = len(L)
+    frac = np.full((ne, max(max_pieces - 1, 1)), np.nan)
+    cnt = np.zeros(ne, np.int64)
+    if not thin.any() or len(other) == 0:
+        return cnt, frac
+    s, p, cum = _arc_param(P[other], P[ch], False)
+    d = np.linalg.norm(_arc_point(p, cum, s) - P[other], axis=1)
+    e = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, ne - 1)
+    t = (s - cum[e]) * L[e] / np.maximum((cum[e + 1] - cum[e]) * L[e], 1e-300)   # fraction along the edge
+    margin = np.maximum(min_len, 0.3 * d) / np.maximum(L[e], 1e-300)
+    ok = thin[e] & (d <= L[e]) & (t > margin) & (t < 1.0 - margin)
+    e, t, margin = e[ok], t[ok], margin[ok]
+    o = np.lexsort((t, e))
+    e, t, margin = e[o], t[o], margin[o]
+    close = np.zeros(len(e), bool)                   # too close to the previous point on the same edge
+    close[1:] = (e[1:] == e[:-1]) & (t[1:] - t[:-1] < np.maximum(margin[1:], margin[:-1]))
+    e, t = e[~close], t[~close]
+    cnt = np.bincount(e, minlength=ne).astype(np.int64)
+    j = np.arange(len(e)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    fit = j < frac.shape[1]
+    frac[e[fit], j[fit]] = t[fit]
+    cnt = np.where(cnt <= frac.shape[1], cnt, 0)     # too many: no ladder for that edge
+    return cnt, frac
 
 
 def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, max_pieces: int = 16,
@@ -1225,11 +1260,18 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
     angle in the far piece. Then ``k`` drops until no fan triangle has an angle below the
     smaller of ``min_skin_angle`` (the imprint's own floor) and the smallest angle of the face
     it replaces.
+    Ladder: a thin edge (longer than ``ratio`` times the height) with vertices of the opposite
+    side across it is split at their closest points instead (:func:`_mirror_fractions`), also
+    where the height is below ``min_height * size``: in the thin trailing-edge wedge of a
+    full-chord rib the two sides then have matching vertices, so the corner triangle and the
+    triangles along the wedge are not slivers (a long edge opposite short ones left 8-degree rib
+    triangles). The ladder is taken when its fans keep the floor above, else its best single
+    point, else the even split.
     Returns the updated ``(P, F, C, FE, FID)``; the members' sides get the new vertices
     (call ``sync_sides`` afterwards)."""
     for _ in range(rounds):
         # ------------------------------------------------ candidates, per member side
-        cm, cw, ci, ck = [], [], [], []
+        cm, cw, ci, ck, ck_old, cfr = [], [], [], [], [], []
         for mi, m in enumerate(mems):                 # loop over members
             for w in (0, 1):
                 ch, other, arc = m.sides[w], m.sides[1 - w], m.side_arcs[w]
@@ -1238,16 +1280,25 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
                 a, b = P[ch[:-1]], P[ch[1:]]
                 L = np.linalg.norm(b - a, axis=1)
                 H = _dist_to_polyline(0.5 * (a + b), P[other])
+                thin = (L > ratio * H) & (L >= 2 * min_piece * size)
                 want = np.where(H >= min_height * size, np.ceil(L / np.maximum(ratio * H, 1e-300)), 1)
                 k = np.minimum(np.minimum(want, max_pieces), np.floor(L / (min_piece * size))).astype(np.int64)
-                i = np.flatnonzero(k >= 2)
+                # ladder: the opposite side's vertices across a thin edge (also near a wedge tip,
+                # where the height rule splits nothing)
+                nm, mf = _mirror_fractions(P, ch, other, L, thin, min_piece * size, max_pieces)
+                k_lad = np.where(nm > 0, nm + 1, k)
+                i = np.flatnonzero(k_lad >= 2)
                 cm.append(np.full(len(i), mi))
                 cw.append(np.full(len(i), w))
                 ci.append(i)
-                ck.append(k[i])
+                ck.append(k_lad[i])
+                ck_old.append(np.maximum(k[i], 1))
+                cfr.append(np.where((nm > 0)[i, None], mf[i], np.nan))
         if not cm or not sum(len(x) for x in ci):
             break
-        cm, cw, ci, ck = (np.concatenate(x).astype(np.int64) for x in (cm, cw, ci, ck))
+        cm, cw, ci, ck, ck_old = (np.concatenate(x).astype(np.int64) for x in (cm, cw, ci, ck, ck_old))
+        cfr = np.vstack(cfr)
+        lad = ~np.isnan(cfr[:, 0])
         a_ = np.array([mems[m].sides[w][i] for m, w, i in zip(cm, cw, ci)], np.int64)
         b_ = np.array([mems[m].sides[w][i + 1] for m, w, i in zip(cm, cw, ci)], np.int64)
         # ------------------------------------------------ the two skin faces of every candidate edge
@@ -1264,15 +1315,44 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
         f0, f1 = o[lo] // 3, o[lo + 1] // 3
         # a fan of k pieces splits the skin angle opposite the edge into k: no fan angle below
         # min_fan_angle (or, when that angle is already smaller, no split at all)
+        floor_ang = np.minimum(min_skin_angle, np.minimum(_tri_min_angles(P, F[f0]), _tri_min_angles(P, F[f1])))
+        # a ladder split is taken as it is when its fans keep the floor below, else the edge
+        # falls back to the even split
+        wl = cfr.shape[1]
+        if lad.any():
+            lv = np.flatnonzero(lad)
+            fr = cfr[lv][np.arange(wl)[None, :] < (ck[lv] - 1)[:, None]]
+            worst = _fan_min_angles(P, F, mems, cm[lv], cw[lv], a_[lv], b_[lv], f0[lv], f1[lv], ck[lv], fr)
+            fail = lv[worst < floor_ang[lv] - 1e-9]
+            if len(fail):
+                # else the single ladder point whose fans are best, if they keep the floor
+                nf = ck[fail] - 1
+                rep = np.repeat(fail, nf)
+                j = np.arange(len(rep)) - np.repeat(np.cumsum(nf) - nf, nf)
+                one = np.ones(len(rep), np.int64) * 2
+                w1 = _fan_min_angles(P, F, mems, cm[rep], cw[rep], a_[rep], b_[rep], f0[rep], f1[rep], one,
+                                     cfr[rep, j])
+                o = np.lexsort((-w1, rep))
+                best = o[np.concatenate([[True], rep[o][1:] != rep[o][:-1]])]
+                good = w1[best] >= floor_ang[rep[best]] - 1e-9
+                gi = rep[best][good]
+                chosen = cfr[gi, j[best][good]]
+                cfr[gi] = np.nan
+                cfr[gi, 0] = chosen
+                ck[gi] = 2
+                fail = np.setdiff1d(fail, gi)
+            lad[fail] = False
+            ck[fail] = ck_old[fail]
+        # a fan of k pieces splits the skin angle opposite the edge into k: no fan angle below
+        # min_fan_angle (or, when that angle is already smaller, no split at all)
         apex = np.minimum(_opposite_angle(P, F[f0], a_, b_), _opposite_angle(P, F[f1], a_, b_))
-        ck = np.minimum(ck, np.floor(apex / min_fan_angle)).astype(np.int64)
+        ck = np.where(lad, ck, np.minimum(ck, np.floor(apex / min_fan_angle))).astype(np.int64)
         # ... but equal pieces along the edge divide that angle evenly only when the apex faces
         # the edge's middle: the split points divide the two apex angles evenly instead (mean of
         # the two), and fewer pieces are used until every fan triangle keeps the smaller of
         # min_skin_angle and the smallest angle of the face it replaces.
-        floor_ang = np.minimum(min_skin_angle, np.minimum(_tri_min_angles(P, F[f0]), _tri_min_angles(P, F[f1])))
         for _k in range(max_pieces):
-            live = np.flatnonzero(ck >= 2)
+            live = np.flatnonzero((ck >= 2) & ~lad)
             if not len(live):
                 break
             worst = _fan_min_angles(P, F, mems, cm[live], cw[live], a_[live], b_[live], f0[live], f1[live], ck[live])
@@ -1281,7 +1361,7 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
                 break
             ck[bad] -= 1
         keep_c = ck >= 2
-        cm, cw, ci, ck, a_, b_, f0, f1 = (x[keep_c] for x in (cm, cw, ci, ck, a_, b_, f0, f1))
+        cm, cw, ci, ck, a_, b_, f0, f1, lad, cfr = (x[keep_c] for x in (cm, cw, ci, ck, a_, b_, f0, f1, lad, cfr))
         if not len(cm):
             break
         # face-disjoint subset: a candidate is taken when it is the first to claim both its faces
@@ -1290,12 +1370,14 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
         np.minimum.at(owner, f0, idx)
         np.minimum.at(owner, f1, idx)
         take = (owner[f0] == idx) & (owner[f1] == idx)
-        cm, cw, ci, ck, a_, b_, f0, f1 = (x[take] for x in (cm, cw, ci, ck, a_, b_, f0, f1))
+        cm, cw, ci, ck, a_, b_, f0, f1, lad, cfr = (x[take] for x in (cm, cw, ci, ck, a_, b_, f0, f1, lad, cfr))
         # ------------------------------------------------ new points on the exact arcs
         nnew = ck - 1
         first = len(P) + np.concatenate([[0], np.cumsum(nnew)[:-1]])
-        X = _fan_points(P, mems, cm, cw, a_, b_, ck,
-                        _fan_fractions(P, a_, b_, (_apex(F, f0, a_, b_), _apex(F, f1, a_, b_)), ck))
+        frac = _fan_fractions(P, a_, b_, (_apex(F, f0, a_, b_), _apex(F, f1, a_, b_)), ck)
+        use = np.arange(wl)[None, :] < nnew[:, None]
+        frac = np.where(np.repeat(lad, nnew), cfr[use], frac)
+        X = _fan_points(P, mems, cm, cw, a_, b_, ck, frac)
         # ------------------------------------------------ node sequences a, new..., b of every split edge
         seq, seq_start, seq_len = _fan_sequences(a_, b_, ck, first)
         # ------------------------------------------------ fans replacing the two faces

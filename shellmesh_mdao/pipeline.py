@@ -58,10 +58,10 @@ class PipelineOptions:
                           ``final_iterations`` after it.
     ``guard_jacobian``    a subdivided element whose projected new nodes would bring its scaled
                           Jacobian to or below this keeps them at their linear position.
-    ``smooth_energy``     energy of both smoothing passes: ``"squared"`` (default: edges aim at the
-                          target length, twice ``size`` before subdivision, ``size`` after) or
-                          ``"length"`` (sum of edge lengths, scale-free); see
-                          :func:`~shellmesh_mdao.smooth.smooth` and docs/optimisation.md.
+    ``smooth_energy``     energy of both smoothing passes: ``"length"`` (default: sum of edge lengths,
+                          scale-free) or ``"squared"`` (edges aim at the target length, twice ``size``
+                          before subdivision, ``size`` after); see :func:`~shellmesh_mdao.smooth.smooth`
+                          and docs/optimisation.md.
     ``smooth_jacobian``   no smoothing step before subdivision may bring an element to or below
                           this scaled Jacobian (nor lower one already below it).
     """
@@ -76,7 +76,7 @@ class PipelineOptions:
     final_iterations: int = 10
     guard_jacobian: float = 0.2
     smooth_jacobian: float = 0.4
-    smooth_energy: str = "squared"
+    smooth_energy: str = "length"
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "PipelineOptions":
@@ -98,7 +98,7 @@ class PipelineOptions:
                 raise ShellMeshError(f"solver option {k!r} must be a {typ.__name__}, got {v!r}") from None
             if typ in (int, float) and not (np.isfinite(out[k]) and out[k] >= 0):
                 raise ShellMeshError(f"solver option {k!r} must be a finite non-negative number, got {v!r}")
-        if out.get("smooth_energy", "squared") not in ("length", "squared"):
+        if out.get("smooth_energy", "length") not in ("length", "squared"):
             raise ShellMeshError(f"solver option 'smooth_energy' must be 'length' or 'squared', got "
                                  f"{out['smooth_energy']!r}")
         return cls(**out)
@@ -342,20 +342,39 @@ def stage_smooth(state: PipelineState) -> PipelineState:
 
 def stage_quad(state: PipelineState) -> PipelineState:
     """One subdivision to all quads (quad -> 4, triangle -> 3) over skin and members, new nodes
-    projected onto their supports, then a final smoothing pass."""
+    projected onto their supports, then a final smoothing pass; elements still at or below
+    :data:`POOR_JACOBIAN` are repaired locally (:func:`~shellmesh_mdao.smooth.untangle` on the two
+    rings around them; report key ``poor_repair``), and what remains is reported and logged."""
+    from .mesh import vertex_faces
     from .quad import subdivide_to_quads
-    from .smooth import smooth
+    from .smooth import _faces_of, smooth, untangle
 
     _need(state, "quad")
     o = state.options
     q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
     if o.final_iterations:
         q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size)
+    sj = scaled_jacobian(q.points, q.faces)
+    poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    repair = None
+    if len(poor):
+        # last resort: move the vertices within two rings of the poor elements along their supports
+        # (smooth.untangle: no element at or below the goal gets worse, none above falls to it)
+        vptr, vface = vertex_faces(q.faces, q.n_points)
+        region = _faces_of(vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), q.n_faces)
+        region = _faces_of(vptr, vface, np.unique(q.faces[region][q.faces[region] >= 0]), q.n_faces)
+        q2, info = untangle(q, sup, goal=POOR_JACOBIAN + 0.1, faces=region)
+        sj2 = scaled_jacobian(q2.points, q2.faces)
+        repair = {"elements_before": int(len(poor)), "elements_after": int((sj2 <= POOR_JACOBIAN).sum()),
+                  "min_before": float(sj.min()), "min_after": float(sj2.min()), "moves": int(info["moves"])}
+        if (sj2 <= POOR_JACOBIAN).sum() < len(poor) or sj2.min() > sj.min():
+            q, sj = q2, sj2
+            poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     st = state.but(mesh=q, supports=sup, stage="quad")
     if o.final_iterations:
         st.report["final_smooth"] = _smooth_report(res)
-    sj = scaled_jacobian(q.points, q.faces)
-    poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    if repair is not None:
+        st.report["poor_repair"] = repair
     st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),
                                   "folded": int((sj <= 0).sum()), "elements": poor[:100].tolist(),
                                   "min_scaled_jacobian": float(sj.min()) if len(sj) else None}
