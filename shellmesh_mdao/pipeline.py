@@ -367,7 +367,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
         sj2 = scaled_jacobian(q2.points, q2.faces)
         repair = {"elements_before": int(len(poor)), "elements_after": int((sj2 <= POOR_JACOBIAN).sum()),
                   "min_before": float(sj.min()), "min_after": float(sj2.min()), "moves": int(info["moves"])}
-        if (sj2 <= POOR_JACOBIAN).sum() < len(poor) or sj2.min() > sj.min():
+        n2 = int((sj2 <= POOR_JACOBIAN).sum())
+        if n2 <= len(poor) and (n2 < len(poor) or sj2.min() > sj.min()):
             q, sj = q2, sj2
             poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     st = state.but(mesh=q, supports=sup, stage="quad")

@@ -157,7 +157,8 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
         skin nodes end on the input surface also where a parent face spans a crease or a
         rounded tip tighter than the element size.
 
-    Returns ``(quad mesh, supports)``. Node ``i < n`` keeps its index and position; edge
+    Returns ``(quad mesh, supports)``. Node ``i < n`` keeps its index, and its position unless
+    ``settle`` moves it (within two rings of a guarded node); edge
     ``e`` of ``mesh.topology()`` gets node ``n + e`` and face ``f`` node ``n + E + f``.
     Children replace their parent in face order and inherit its component; each feature
     edge becomes two feature edges with the same id, and its midpoint is added to

@@ -1247,7 +1247,10 @@ def untangle(mesh: ShellMesh, supports: Supports, *, goal: float = 0.3, iteratio
                            np.tile(nref[inc_f], (K, 1))).reshape(K, -1)
         mn = np.minimum.reduceat(qk, start, axis=1)                       # (K, c)
         pen = np.add.reduceat(np.maximum(0.0, hi - qk) ** 2, start, axis=1)
-        feas = ok.T & (mn >= np.minimum(cur_min, goal)) & (
+        # every face of the vertex keeps min(its quality, goal): none at or below the goal gets
+        # worse, none above falls to it
+        keep = np.logical_and.reduceat(qk >= np.minimum(qf, goal)[None, :] - 1e-12, start, axis=1)
+        feas = ok.T & keep & (
             (pen < cur_pen - 1e-12) | ((pen <= cur_pen) & (mn > cur_min + 1e-12)))
         pen = np.where(feas, pen, np.inf)
         low = pen == pen.min(0)
