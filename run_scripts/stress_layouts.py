@@ -388,7 +388,9 @@ def classify_refusal(cls: str, message: str, stage: str, t: dict) -> tuple:
       element size, confirmed by the independent rib (spar) gap < 1 h;
     * ProjectionError: a member outside the wing (``outside``) or zero-length spars;
     * any other documented error of a later stage (imprint, members, ...): a tight layout
-      (:data:`TIGHT`).
+      (:data:`TIGHT`); a refusal that names its own cause needs that cause's independent
+      figure: a spar web refusal ``spar_height`` < :data:`HEIGHT_TIGHT`, a sharp-edge refusal
+      of a full-chord rib ``wedge`` < :data:`WEDGE_TIGHT`.
 
     Otherwise "FAIL"."""
     g = {k: (math.inf if t.get(k) is None else t[k]) for k in ("rib_gap", "spar_gap")}
@@ -411,6 +413,15 @@ def classify_refusal(cls: str, message: str, stage: str, t: dict) -> tuple:
             return "invalid layout", f"documented refusal of a layout with members outside the wing: {t['tight']}"
         return "FAIL", "ProjectionError for a layout whose members all lie inside the wing (rays along +-up " \
                        "from 41 points of every member curve hit the skin; full-chord ribs sampled for c in [0.02, 0.98])"
+    # refusals that name their own cause must be backed by the independent figure of that cause
+    evidence = (("is only", "tall near", "spar_height", HEIGHT_TIGHT, "a spar web"),
+                ("cuts a sharp edge of the skin", "", "wedge", WEDGE_TIGHT, "a full-chord rib section corner"))
+    for a, b, key, bound, what in evidence:
+        if a in message and b in message:
+            v = math.inf if t.get(key) is None else t[key]
+            if v < bound:
+                return "invalid layout", f"documented refusal of a tight layout: {t['tight']}"
+            return "FAIL", f"{what} refusal, but the independent check finds {key} = {v:.3g} (>= {bound:.3g})"
     if t.get("tight"):
         return "invalid layout", f"documented refusal of a tight layout: {t['tight']}"
     return "FAIL", f"documented refusal of a layout that is not tight (all gaps >= {TIGHT:g} element sizes, " \
@@ -549,7 +560,8 @@ def write_page(results: list, meta: dict, md_path: Path) -> None:
          "conforming junctions (`check_guarantees` of tests/test_pipeline.py). Gaps are in element sizes h "
          "(independent of the package: rib-plane offsets, spar chord distances at root/tip, spar to LE/TE, "
          f"outermost rib to the skin's end along the rib normal, smallest spar web height); a layout is *tight* "
-         f"when a gap is below {TIGHT:g} h or a spar web below {HEIGHT_TIGHT:g} h.",
+         f"when a gap is below {TIGHT:g} h, a spar web below {HEIGHT_TIGHT:g} h or a full-chord rib's section has a "
+         f"corner below {WEDGE_TIGHT:.1f} degrees.",
          "",
          "| seed | geometry | ribs (eta) | spars (c) | size (x base) | outcome | seconds | min SJ | elements | "
          "gaps: rib / spar / spar-edge / rib-end / spar height (h) |",

@@ -542,9 +542,12 @@ def check_member_heights(locator: SurfaceLocator, layout, size: float, n: int = 
         h, p = out[m.name]
         if h < MIN_MEMBER_HEIGHT * size:
             edge = "trailing" if m.parameter > 0.5 else "leading"
+            ratio = np.floor(h / size * 1000.0) / 1000.0                # rounded down: never shows 0.3
+            e = np.floor(np.log10(h / MIN_MEMBER_HEIGHT)) - 3            # 4 significant digits, rounded down
+            limit = np.floor(h / MIN_MEMBER_HEIGHT / 10.0 ** e) * 10.0 ** e
             raise LayoutError(
                 f"spar '{m.name}' (c={m.parameter:g}) is only {h:.4g} tall near {_fmt_points(p[None], [0])}, "
-                f"{h / size:.2f} element sizes (at least {MIN_MEMBER_HEIGHT:g} needed): the wing is too thin "
-                f"there for a web of quads of size {size:g}; move the spar away from the {edge} edge or use an "
-                f"element size below {h / MIN_MEMBER_HEIGHT:.4g}")
+                f"{ratio:g} element sizes (at least {MIN_MEMBER_HEIGHT:g} needed): the wing is too thin "
+                f"there for a web of quads of size {size:g}; move the spar away from the {edge} edge (or the "
+                f"outermost rib inboard, if the point is at a thin tip) or use an element size below {limit:.4g}")
     return out

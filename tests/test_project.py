@@ -311,7 +311,7 @@ def test_wing_member_missing_the_skin_is_named(manifest, locators):
 
 def test_spar_web_lower_than_the_element_size_allows_is_refused(manifest, locators, geometry_dir):
     """A spar close to the thin edge of the straight wing (c=0.03: web 0.0036 tall) is refused at
-    size 0.02 (0.18 element sizes) with its name and the largest size that works; the same
+    size 0.02 (0.177 element sizes) with its name and the largest size that works; the same
     layout passes at that size, and the benchmark spars pass at the benchmark size."""
     from shellmesh_mdao.errors import LayoutError
     from shellmesh_mdao.pipeline import run_pipeline
@@ -322,8 +322,8 @@ def test_spar_web_lower_than_the_element_size_allows_is_refused(manifest, locato
     web = h["wing/spar_0"][0]
     assert 0.003 < web < 0.004 and h["wing/spar_1"][0] > 0.04
     with pytest.raises(LayoutError, match=r"spar 'wing/spar_0' \(c=0.03\) is only 0.00\d+ tall near \[.*\], "
-                                          r"0.18 element sizes \(at least 0.3 needed\).* move the spar away from "
-                                          r"the leading edge or use an element size below 0.0118"):
+                                          r"0.177 element sizes \(at least 0.3 needed\).* move the spar away from "
+                                          r"the leading edge .*or use an element size below 0.01186"):
         check_member_heights(loc, lay, 0.02)
     check_member_heights(loc, lay, 0.999 * web / MIN_MEMBER_HEIGHT)
     ok = check_member_heights(loc, layout_from_manifest(manifest, "straight_wing", ribs=10, spars=[0.15, 0.65]), 0.02)

@@ -91,7 +91,11 @@ def test_classifier_on_known_messages(manifest, geometry_dir):
     r = SL.run_case(case, geometry_dir, manifest)
     assert r["outcome"] == "invalid layout" and r["stage"] == "project", r
     assert r["error"].startswith("LayoutError: spar 'wing/spar_0' (c=0.03) is only") and "spar web" in r["reason"]
-    assert SL.classify_refusal("LayoutError", r["error"].split(": ", 1)[1], "project", dict(t, tight=""))[0] == "FAIL"
+    # the refusal names its cause (the web): only the independent web height may back it, not other tight gaps
+    msg = r["error"].split(": ", 1)[1]
+    assert SL.classify_refusal("LayoutError", msg, "project", dict(t, spar_height=1.5))[0] == "FAIL"
+    assert SL.classify_refusal("LayoutError", msg, "project",
+                               dict(t, spar_height=1.5, tight="rib gap 1.50 element sizes (< 2)"))[0] == "FAIL"
 
 
 @pytest.mark.slow
