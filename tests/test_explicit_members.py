@@ -78,15 +78,8 @@ def wing_with_explicit_members(surface, ribs: int = 5) -> dict:
 
 
 # ============================================================================ helpers
-def component_ids(mesh, name):
-    return [i for i, c in enumerate(mesh.component_names) if c == name or c.startswith(name + "/seg_")]
-
-
-def face_mask(mesh, names):
-    return np.isin(mesh.component, [i for n in names for i in component_ids(mesh, n)])
-
-
-from test_members import clip_polygon, poly_area  # noqa: E402  (the same polygon helpers)
+from test_members import clip_polygon, edge_member_counts, poly_area  # noqa: E402  (the same helpers)
+from test_members import member_face_mask as face_mask  # noqa: E402
 
 
 def segment_planes(spec):
@@ -124,18 +117,7 @@ def check_skin_and_members(r, names):
     assert len(c.duplicate_points) == 0 and len(c.hanging_nodes) == 0, c.problems()
     assert c.ok, c.problems()
     mesh.validate()
-    topo = mesh.topology()
-    he_face, he_edge = topo.he_face, topo.he_edge
-    member_of_face = np.full(mesh.n_faces, -1)
-    for k, n in enumerate(names):
-        member_of_face[face_mask(mesh, [n])] = k
-    n_skin = np.bincount(he_edge, weights=(~mem[he_face]).astype(float), minlength=len(topo.edges)).astype(int)
-    n_mem = topo.valence - n_skin
-    hm = member_of_face[he_face]
-    sel = hm >= 0
-    uk, cnt = np.unique(he_edge[sel] * len(names) + hm[sel], return_counts=True)
-    e_of = uk // len(names)
-    members_at_edge = np.bincount(e_of, minlength=len(topo.edges))
+    topo, n_skin, n_mem, e_of, cnt, members_at_edge = edge_member_counts(mesh, names, mem)
     # every member boundary edge (one face of that member) is an edge of the skin or of another member
     boundary = cnt == 1
     shared = (n_skin[e_of] > 0) | (members_at_edge[e_of] > 1)

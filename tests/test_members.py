@@ -32,6 +32,24 @@ def member_face_mask(mesh, names):
     return np.isin(mesh.component, ids)
 
 
+def edge_member_counts(mesh, names, mem):
+    """Faces around every edge of ``mesh``: ``(topo, n_skin, n_mem, e_of, cnt, members_at_edge)``
+    with skin and member faces per edge (``mem``: member face mask of ``names``) and, per
+    (edge, member) pair with faces there, its edge ``e_of`` and face count ``cnt``."""
+    topo = mesh.topology()
+    he_face, he_edge = topo.he_face, topo.he_edge
+    member_of_face = np.full(mesh.n_faces, -1)
+    for k, n in enumerate(names):
+        member_of_face[member_face_mask(mesh, [n])] = k
+    n_skin = np.bincount(he_edge, weights=(~mem[he_face]).astype(float), minlength=len(topo.edges)).astype(int)
+    n_mem = topo.valence - n_skin
+    hm = member_of_face[he_face]
+    sel = hm >= 0
+    uk, cnt = np.unique(he_edge[sel] * len(names) + hm[sel], return_counts=True)
+    e_of = uk // len(names)
+    return topo, n_skin, n_mem, e_of, cnt, np.bincount(e_of, minlength=len(topo.edges))
+
+
 def poly_area(poly, normal):
     """Area of a closed planar polygon in 3D."""
     return 0.5 * abs(np.cross(poly, np.roll(poly, -1, axis=0)).sum(0) @ normal)
@@ -67,21 +85,8 @@ def check_member_mesh(mesh, skin_face_count, infos, allow_free_edges=False):
     assert len(c.duplicate_points) == 0, c.problems()
     assert len(c.hanging_nodes) == 0, c.problems()
     assert c.ok, c.problems()
-    topo = mesh.topology()
     # faces around each edge: how many skin faces and how many of each member
-    he_face, he_edge = topo.he_face, topo.he_edge
-    member_of_face = np.full(mesh.n_faces, -1)
-    for k, n in enumerate(names):
-        member_of_face[member_face_mask(mesh, [n])] = k
-    n_skin = np.bincount(he_edge, weights=(~mem[he_face]).astype(float), minlength=len(topo.edges)).astype(int)
-    n_mem = topo.valence - n_skin
-    # per (edge, member) counts
-    hm = member_of_face[he_face]
-    sel = hm >= 0
-    key = he_edge[sel] * len(names) + hm[sel]
-    uk, cnt = np.unique(key, return_counts=True)
-    e_of = uk // len(names)
-    n_members_at_edge = np.bincount(e_of, minlength=len(topo.edges))
+    topo, n_skin, n_mem, e_of, cnt, n_members_at_edge = edge_member_counts(mesh, names, mem)
     # 1. every member boundary edge (one face of that member) is an edge of the skin or of another member
     boundary = cnt == 1
     shared = (n_skin[e_of] > 0) | (n_members_at_edge[e_of] > 1)
