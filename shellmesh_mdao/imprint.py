@@ -1470,9 +1470,11 @@ def _skin_roles(n, fe, fid, fixed, chain_vs, arcs):
     return kind, chain_of
 
 
-def _closest_on_segments(q, a, b):
+def _closest_on_segments(q, a, b, full: bool = False):
     """Closest points on a set of segments a-b (s, 3) to query points q (n, 3), and their
-    distances (KD-tree of segment midpoints with a conservative candidate radius)."""
+    distances (KD-tree of segment midpoints with a conservative candidate radius); with
+    ``full``, also the segment of each closest point and its parameter along it (ties: the
+    lowest segment)."""
     q = np.atleast_2d(q)
     ab = b - a
     L = np.linalg.norm(ab, axis=1)
@@ -1489,7 +1491,10 @@ def _closest_on_segments(q, a, b):
     order = np.lexsort((si, dist, qi))
     first = np.ones(len(order), bool)
     first[1:] = qi[order][1:] != qi[order][:-1]
-    return x[order[first]], dist[order[first]]
+    o = order[first]
+    if full:
+        return x[o], dist[o], si[o], t[o]
+    return x[o], dist[o]
 
 
 def _min_angles_small(X):

@@ -952,26 +952,13 @@ def _plane_frame(m: _Member, P: np.ndarray, nodes: np.ndarray):
 # ============================================================================ chain spacing
 def _arc_param(q: np.ndarray, poly: np.ndarray, closed: bool):
     """Arc-length parameter of the closest point on a polyline to each query point, and the
-    polyline's cumulative lengths (vectorised: KD-tree of segment midpoints, candidate radius)."""
+    polyline's cumulative lengths (:func:`~shellmesh_mdao.imprint._closest_on_segments`)."""
+    from .imprint import _closest_on_segments
     p = np.vstack([poly, poly[:1]]) if closed else poly
-    a, b = p[:-1], p[1:]
-    ab = b - a
-    L = np.linalg.norm(ab, axis=1)
+    L = np.linalg.norm(p[1:] - p[:-1], axis=1)
     cum = np.concatenate([[0.0], np.cumsum(L)])
-    tree = cKDTree(0.5 * (a + b))
-    d0, _ = tree.query(q)
-    cand = tree.query_ball_point(q, d0 + 0.5 * L.max() + 1e-300)
-    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
-    qi = np.repeat(np.arange(len(q)), cnt)
-    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
-    L2 = np.maximum(L[si] ** 2, 1e-300)
-    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / L2, 0.0, 1.0)
-    dist = np.linalg.norm(a[si] + t[:, None] * ab[si] - q[qi], axis=1)
-    order = np.lexsort((dist, qi))
-    first = np.ones(len(order), bool)
-    first[1:] = qi[order][1:] != qi[order][:-1]
-    o = order[first]
-    return cum[si[o]] + t[o] * L[si[o]], p, cum
+    _, _, seg, t = _closest_on_segments(q, p[:-1], p[1:], full=True)
+    return cum[seg] + t * L[seg], p, cum
 
 
 def _arc_point(p: np.ndarray, cum: np.ndarray, s: np.ndarray) -> np.ndarray:
