@@ -22,8 +22,9 @@ and so the peak resident memory of every case (``ru_maxrss`` of the child) is it
    peak RSS and time.
 
 "Same size" for Gmsh: it triangulates at ``2 * size`` and its subdivision halves every edge, so its
-final quads have edges of about ``size`` -- exactly what the pipeline does (remesh at ``2 * size``,
-merge, subdivide). The median edge / size column of the page checks it for both.
+final quads have edges of about ``size`` -- what the pipeline does too (remesh at
+``REMESH_FACTOR * size``, merge, subdivide). The median edge / size column of the page checks it
+for both.
 
 Quality figures (:func:`mesh_figures`) are computed with :mod:`shellmesh_mdao.quality` on both
 meshes; members are the components whose names contain ``/rib_`` or ``/spar_``
@@ -382,12 +383,15 @@ def run_benchmark(geometry_dir, *, only=None, quick: bool = False, perf: bool = 
     import scipy
     import trimesh
 
+    from shellmesh_mdao import pipeline
+
     res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
                        "numpy": np.__version__, "scipy": scipy.__version__, "trimesh": trimesh.__version__,
                        "gmsh": gmsh.__version__,
                        "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1)},
            "started": time.strftime("%Y-%m-%d %H:%M"), "load_start": _load(), "quick": bool(quick),
-           "only": only, "corpus": [], "performance": None, "memory": None}
+           "only": only, "corpus": [], "performance": None, "memory": None,
+           "remesh_factor": pipeline.REMESH_FACTOR}
     if quick:
         cases = [(n, s, r) for n, s, r in QUICK_CASES if only in (None, n)]
         perf = memory = False
@@ -520,8 +524,9 @@ def render_page(res: dict, keep: str = "") -> str:
           "per wing and 2 spars. Gmsh remeshes the bare skin STL: `classifySurfaces` "
           f"({GMSH_FEATURE_ANGLE:g}° feature angle, reparametrisation) + `createGeometry`, Frontal-Delaunay for quads "
           "(`Mesh.Algorithm = 8`), Blossom (`Mesh.RecombinationAlgorithm = 1`, `RecombineAll`), one all-quad "
-          "subdivision (`Mesh.SubdivisionAlgorithm = 1`), one thread. Both mesh at `2 × size` and subdivide once, so "
-          "both aim at quads of edge `size` (median edge / size checks it).", ""]
+          "subdivision (`Mesh.SubdivisionAlgorithm = 1`), one thread. Gmsh meshes at `2 × size`, the pipeline at "
+          f"`{res.get('remesh_factor', 2.0):g} × size` (`pipeline.REMESH_FACTOR`); both subdivide once, so both aim "
+          "at quads of edge `size` (median edge / size checks it).", ""]
 
     # ---- targets
     L += ["## Quality targets (the pipeline's final mesh)", ""]

@@ -53,13 +53,21 @@ from .mesh import ShellMesh, vertex_faces
 from .section import Plane
 
 __all__ = ["MemberInfo", "member_infos", "build_members", "member_statistics", "triangulate_planar",
-           "coons_patch", "explicit_plane", "DEFAULT_MIN_ANGLE"]
+           "coons_patch", "explicit_plane", "DEFAULT_MIN_ANGLE", "NARROW_STRIP",
+           "STRIP_MIN_ANGLE"]
 
 #: Minimum angle (degrees) requested from the constrained Delaunay refinement (``q``).
 DEFAULT_MIN_ANGLE = 30.0
 #: a closed (full-chord) member's outline may not have a corner sharper than this: a quad in
 #: a corner of angle a has a scaled Jacobian of at most sin(a), and the pipeline guarantees > 0.2
 MIN_LOOP_CORNER = float(np.degrees(np.arcsin(0.2)))
+#: a member region none of whose points is farther than this (in units of the mesh size) from
+#: its segments is a strip about one element high (a spar web, a rib of a thin wing): it is
+#: triangulated from its boundary nodes alone (see :func:`triangulate_planar`)
+NARROW_STRIP = 0.7
+#: ... if its smallest angle is at least this (degrees; sin 15 = 0.26: the quads it gives stay
+#: clear of the 0.2 scaled-Jacobian limit), or no smaller than the refined mesh's
+STRIP_MIN_ANGLE = 15.0
 _EQ_AREA = np.sqrt(3.0) / 4.0
 
 
@@ -350,9 +358,22 @@ def _prune_2d(x, tris, seg, n_fixed, min_angle: float = 30.0, rounds: int = 6, s
     return x, tris
 
 
+def _strip_width(x: np.ndarray, seg: np.ndarray, tris: np.ndarray, step: float = 0.05) -> float:
+    """Largest distance from the centroids and edge midpoints of ``tris`` to the segments (their
+    nodes ``x`` sampled every ``step``): how far the region's interior reaches from its boundary
+    (half the height of a strip)."""
+    a, b = x[seg[:, 0]], x[seg[:, 1]]
+    k = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(np.int64))
+    s = np.repeat(np.arange(len(seg)), k)
+    t = (np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)) / k[s]
+    samples = np.vstack([a[s] + t[:, None] * (b[s] - a[s]), b])
+    q = np.vstack([x[tris].mean(1)] + [0.5 * (x[tris[:, i]] + x[tris[:, (i + 1) % 3]]) for i in range(3)])
+    return float(cKDTree(samples).query(q)[0].max()) + 0.5 * step
+
+
 def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_angle: float = DEFAULT_MIN_ANGLE,
                        name: str = "member", gradation: float = 0.3, rounds: int = 3,
-                       smooth: int = 6) -> tuple[np.ndarray, np.ndarray]:
+                       smooth: int = 6, narrow: float = NARROW_STRIP) -> tuple[np.ndarray, np.ndarray]:
     """Constrained Delaunay triangulation of a planar straight-line graph in 2D.
 
     ``uv`` (n, 2) nodes, ``segments`` (s, 2) node pairs that must be triangle edges (the
@@ -366,6 +387,13 @@ def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_an
     (unchanged), then the new interior nodes, and (t, 3) counter-clockwise triangles.
     Raises :class:`ImprintError` naming ``name`` if a segment is lost (crossing segments) or
     a node is left outside the region.
+
+    A **strip** (no point of the region farther than ``narrow * size`` from a segment: a spar web
+    or rib about one element high) keeps the boundary-only triangulation, without interior
+    nodes, when its smallest angle is at least :data:`STRIP_MIN_ANGLE` (15 degrees) or the refined
+    mesh's: a row of triangles each with an edge on one chain, which the merge pairs into quads
+    with one edge on each chain (refinement would put nodes at mid-height, whose diamonds
+    subdivide into skewed quads). ``narrow=0`` always refines.
     """
     import triangle as tr
 
@@ -376,6 +404,10 @@ def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_an
     x = (uv - o) / size                                       # target edge length 1
     sizing = _sizing_field(x, seg, gradation)
     t = tr.triangulate({"vertices": x, "segments": seg.astype(np.int32)}, "pYYQ")
+    strip = None
+    t0 = np.asarray(t.get("triangles", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+    if narrow > 0 and len(t0) and len(t["vertices"]) == n and _strip_width(x, seg, t0) < narrow:
+        strip = t0
     opts = f"rpYYq{float(min_angle):.6f}aQ"
     for _ in range(rounds):
         tris = np.asarray(t["triangles"], np.int64)
@@ -390,6 +422,9 @@ def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_an
     if smooth and len(xo) > n:
         xo, tris = _smooth_2d(xo, tris, seg, n, smooth)
         xo, tris = _prune_2d(xo, tris, seg, n, smooth=smooth)
+    if strip is not None and (_tri_min_angles(x, strip).min()
+                              >= min(STRIP_MIN_ANGLE, _tri_min_angles(xo, tris).min()) - 1e-9):
+        xo, tris = x, strip
     if len(xo) < n or not np.array_equal(xo[:n], x):
         raise ImprintError(f"{name}: the member triangulation changed its boundary nodes (coincident chain "
                            "vertices); use a smaller --size")

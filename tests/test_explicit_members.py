@@ -17,12 +17,13 @@ import pytest
 from shellmesh_mdao.errors import LayoutError, ProjectionError, ShellMeshError
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.layout import load_layout
-from shellmesh_mdao.members import _tri_min_angles
+from shellmesh_mdao.members import STRIP_MIN_ANGLE, _tri_min_angles
 from shellmesh_mdao.pipeline import run_pipeline
 from shellmesh_mdao.project import SurfaceLocator
 from shellmesh_mdao.section import Plane, section_arc
 
-MIN_ANGLE = 20.0
+# smallest member triangle angle: 20 deg where refined, STRIP_MIN_ANGLE in one-element-high strips
+MIN_ANGLE = min(20.0, STRIP_MIN_ANGLE)
 WING_SIZE = 0.05          # target quad size on the default NACA wing (skin remeshed at 0.1)
 
 

@@ -13,13 +13,15 @@ from shellmesh_mdao.errors import ImprintError, LayoutError, ShellMeshError, Siz
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.imprint import ChainResult
 from shellmesh_mdao.layout import layout_from_manifest
-from shellmesh_mdao.members import (MemberInfo, build_members, coons_patch, member_infos, member_statistics,
-                                    triangulate_planar, _tri_min_angles)
+from shellmesh_mdao.members import (STRIP_MIN_ANGLE, MemberInfo, build_members, coons_patch, member_infos,
+                                    member_statistics, triangulate_planar, _tri_min_angles)
 from shellmesh_mdao.mesh import ShellMesh, concatenate
 from shellmesh_mdao.pipeline import run_pipeline
 from shellmesh_mdao.section import Plane, SectionArc, section_arc
 
-MIN_ANGLE = 20.0
+MIN_ANGLE = 20.0          # refined member regions (triangulate_planar's q30 with pruning)
+# any member triangle: a strip one element high keeps its boundary-only triangulation down to this
+MEMBER_MIN_ANGLE = min(MIN_ANGLE, STRIP_MIN_ANGLE)
 
 
 # ============================================================================ helpers
@@ -103,7 +105,7 @@ def check_member_mesh(mesh, skin_face_count, infos, allow_free_edges=False):
     assert (topo.valence <= 4).all() and (topo.valence[n_skin > 0] <= 3).all()
     # 4. angles
     ang = _tri_min_angles(mesh.points, mesh.faces[mem, :3])
-    assert ang.min() >= MIN_ANGLE, f"member triangle with angle {ang.min():.2f} deg"
+    assert ang.min() >= MEMBER_MIN_ANGLE, f"member triangle with angle {ang.min():.2f} deg"
     # 5. the skin is closed
     assert mesh.submesh(~mem).is_closed()
     # 6. member nodes on their plane
@@ -301,7 +303,7 @@ def test_non_planar_member_is_a_coons_patch():
     assert mesh.check().ok, mesh.check().problems()
     mem = member_face_mask(mesh, ["tw"])
     f = mesh.faces[mem, :3]
-    assert _tri_min_angles(mesh.points, f).min() >= MIN_ANGLE
+    assert _tri_min_angles(mesh.points, f).min() >= MEMBER_MIN_ANGLE
     # every node on the hyperbolic paraboloid (1-t)L(s) + tU(s)
     v = np.unique(f)
     p = mesh.points[v]
@@ -386,6 +388,48 @@ def test_triangulate_planar_keeps_every_segment():
     bad = np.vstack([seg, [[2, len(bottom) + 3 + 5]]])         # crosses the interior polyline
     with pytest.raises(ImprintError, match="cross"):
         triangulate_planar(uv, bad, 0.25)
+
+
+def _strip(rng, length=12.0, height=1.0):
+    """A spar-web-like strip: bottom and top chains with irregular spacing (0.7-1.3) in units of
+    the target size, one-piece sides."""
+    def chain(y):
+        st = rng.uniform(0.7, 1.3, int(length))
+        xs = np.concatenate([[0.0], np.cumsum(st) / st.sum() * length])
+        return np.stack([xs, np.full(len(xs), y)], 1)
+    bottom, top = chain(0.0), chain(height)[::-1]
+    uv = np.vstack([bottom, top])
+    n = len(uv)
+    return uv, np.stack([np.arange(n), (np.arange(n) + 1) % n], 1), len(bottom)
+
+
+def test_triangulate_planar_strip_is_one_row_of_quad_pairs():
+    """A strip one element high (a spar web) gets no interior node: every triangle has an edge
+    on a chain and its apex on the other, so the merge pairs them into quads with one edge on
+    each chain. The same strip three elements high is refined (interior nodes)."""
+    from shellmesh_mdao.merge import merge_triangles
+    from shellmesh_mdao.quality import scaled_jacobian
+
+    rng = np.random.default_rng(3)
+    for seed in range(4):
+        uv, seg, nb = _strip(np.random.default_rng(seed), height=1.0)
+        uv_all, tris = triangulate_planar(uv, seg, 1.0)
+        assert len(uv_all) == len(uv)                          # no interior node
+        on_bottom = (tris < nb).sum(1)
+        assert set(on_bottom.tolist()) <= {1, 2}               # one edge on a chain, apex on the other
+        assert _tri_min_angles(uv_all, tris).min() >= STRIP_MIN_ANGLE
+        m = ShellMesh(np.c_[uv_all, np.zeros(len(uv_all))], tris)
+        q, res = merge_triangles(m, merge_bonus=1.0)
+        # at most one unmerged triangle per unit of chain-count mismatch, the rest quads
+        assert q.n_tris <= abs(2 * nb - len(uv)) + 2
+        quads = q.faces[q.faces[:, 3] >= 0]
+        assert ((quads < nb).sum(1) == 2).all()                 # each quad: one edge on each chain
+        assert scaled_jacobian(q.points, q.faces)[q.faces[:, 3] >= 0].min() > 0.5
+    uv, seg, _ = _strip(rng, height=3.0)
+    uv_all, tris = triangulate_planar(uv, seg, 1.0)
+    assert len(uv_all) > len(uv)
+    uv_all, tris = triangulate_planar(*_strip(np.random.default_rng(0), height=1.0)[:2], 1.0, narrow=0.0)
+    assert len(uv_all) > len(_strip(np.random.default_rng(0), height=1.0)[0])
 
 
 # ============================================================================ wings
