@@ -58,10 +58,10 @@ class PipelineOptions:
                           ``final_iterations`` after it.
     ``guard_jacobian``    a subdivided element whose projected new nodes would bring its scaled
                           Jacobian to or below this keeps them at their linear position.
-    ``smooth_energy``     energy of both smoothing passes: ``"length"`` (default: sum of edge lengths,
-                          scale-free) or ``"squared"`` (edges aim at the target length, twice ``size``
-                          before subdivision, ``size`` after); see :func:`~shellmesh_mdao.smooth.smooth`
-                          and docs/optimisation.md.
+    ``smooth_energy``     energy of both smoothing passes: ``"squared"`` (default: edges aim at the
+                          target length, twice ``size`` before subdivision, ``size`` after) or
+                          ``"length"`` (sum of edge lengths, scale-free: the paper's words); see
+                          :func:`~shellmesh_mdao.smooth.smooth` and docs/optimisation.md.
     ``smooth_jacobian``   no smoothing step before subdivision may bring an element to or below
                           this scaled Jacobian (nor lower one already below it).
     """
@@ -76,7 +76,7 @@ class PipelineOptions:
     final_iterations: int = 10
     guard_jacobian: float = 0.2
     smooth_jacobian: float = 0.4
-    smooth_energy: str = "length"
+    smooth_energy: str = "squared"
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "PipelineOptions":

@@ -418,7 +418,8 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
     curves : dict feature-edge id -> polyline (k, 3) or list of polylines (a polyline whose
         last point equals its first is closed; a ``(points, closed)`` tuple also works).
         Each feature edge is assigned to the polyline of its id on which both its nodes
-        lie (within ``tol`` times the mesh diagonal; the nearest one when several do).
+        lie (within ``tol`` times the mesh diagonal; when several do, the first listed unless a
+        later one is closer by more than that tolerance).
     sliding : which of ``mesh.fixed_vertices`` may slide: None (none), True (all) or an
         index array. Vertices not in ``fixed_vertices`` are never forced fixed.
     tol : relative tolerance (times the diagonal) for matching feature edges to curves.
@@ -486,7 +487,11 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
         d0 = c.closest(P[fe[sel, 0]])[1]
         d1 = c.closest(P[fe[sel, 1]])[1]
         d = np.maximum(d0, d1)
-        take = (d <= eps) & (d < best[sel])
+        # a later curve takes an edge only if it is closer by more than eps: an edge on two
+        # curves (a member chain lies on the member plane's exact section AND on the polyline
+        # of its own feature edges) goes to the first one whatever the rounding, so the
+        # vertices between two such edges see one curve and slide on it
+        take = (d <= eps) & (d < best[sel] - eps)
         best[sel[take]] = d[take]
         edge_curve[sel[take]] = ci
     # ---- vertex classification

@@ -87,6 +87,23 @@ def test_derive_supports_kinds():
         derive_supports(mesh, None, planes, curves)
 
 
+def test_chain_on_two_curves_slides_on_one():
+    """A member chain lies on the member plane's exact section AND on the polyline of its own
+    feature edges (the pipeline passes both): every chain edge goes to the first curve, so
+    no interior chain node is fixed by rounding (edges split between the two curves made a
+    node look like a crossing: 84 spar-chain nodes of a swept-wing layout were fixed)."""
+    mesh, loc, planes, curves = t_mesh()
+    fe = mesh.feature_edges
+    chain = np.unique(fe)
+    order = chain[np.argsort(mesh.points[chain, 0])]
+    own = mesh.points[order]
+    for first, second in ((curves[1], own), (own, curves[1])):
+        sup = derive_supports(mesh, loc, planes, {1: [first, second]}, sliding=True)
+        ends = order[[0, -1]]
+        assert (sup.kind[np.setdiff1d(chain, ends)] == CURVE).all()
+        assert (sup.curve_of_edges(fe) == 0).all()
+
+
 def test_smoothing_keeps_every_vertex_on_its_support_and_improves():
     mesh, loc, planes, curves = t_mesh()
     sup = derive_supports(mesh, loc, planes, curves, sliding=True)
