@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .mesh import ShellMesh, vertex_faces
+from .mesh import ShellMesh, cross_rows, vertex_faces
 from .section import Plane, SectionArc, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain"]
@@ -942,14 +942,14 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     s = T[f1, (s1 + 2) % 3]
     ok = (T[f1, s1] == q) & (T[f1, (s1 + 1) % 3] == p) & (r != s)
     p, q, r, s, f0, f1, ek = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok], ek[ok]
-    n0 = np.cross(P[q] - P[p], P[r] - P[p])
-    n1 = np.cross(P[p] - P[q], P[s] - P[q])
+    n0 = cross_rows(P[q] - P[p], P[r] - P[p])
+    n1 = cross_rows(P[p] - P[q], P[s] - P[q])
     old_min = np.minimum(_tri_angles_min(P, np.stack([p, q, r], 1)), _tri_angles_min(P, np.stack([q, p, s], 1)))
     t0 = np.stack([r, s, q], 1)
     t1 = np.stack([s, r, p], 1)
     new_min = np.minimum(_tri_angles_min(P, t0), _tri_angles_min(P, t1))
-    nn0 = np.cross(P[t0[:, 1]] - P[t0[:, 0]], P[t0[:, 2]] - P[t0[:, 0]])
-    nn1 = np.cross(P[t1[:, 1]] - P[t1[:, 0]], P[t1[:, 2]] - P[t1[:, 0]])
+    nn0 = cross_rows(P[t0[:, 1]] - P[t0[:, 0]], P[t0[:, 2]] - P[t0[:, 0]])
+    nn1 = cross_rows(P[t1[:, 1]] - P[t1[:, 0]], P[t1[:, 2]] - P[t1[:, 0]])
     navg = n0 / np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-300) + \
         n1 / np.maximum(np.linalg.norm(n1, axis=1, keepdims=True), 1e-300)
     cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1), 1e-300)
@@ -1009,7 +1009,7 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     ptr, star = vertex_faces(T, n)
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
     cen = (a + b + c) / 3
-    nrm = np.cross(b - a, c - a)
+    nrm = cross_rows(b - a, c - a)
     area = 0.5 * np.linalg.norm(nrm, axis=1)
     cand = np.flatnonzero(movable & (np.diff(ptr) > 0))
     if not len(cand):
@@ -1046,7 +1046,7 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     Pn = np.stack([pa, pb, pc], 1)
     ang_new = _angles3(Pn)
     ang_old = _tri_angles_min(P, Tm)
-    nn = np.cross(pb - pa, pc - pa)
+    nn = cross_rows(pb - pa, pc - pa)
     flip = np.einsum("ij,ij->i", nn, nrm[tris]) <= 0
     worst_new = np.full(n, np.inf)
     worst_old = np.full(n, np.inf)

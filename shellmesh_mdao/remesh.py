@@ -38,7 +38,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, cross_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
 __all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION",
@@ -100,13 +100,13 @@ def _independent(owner, res, rank, nres, max_sub=12):
 
 def _tri_normals(P, F):
     """Unnormalised normals (twice the area vectors) of triangles ``F``."""
-    return np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    return cross_rows(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
 
 
 def _tri_min_angle(A, B, C):
     """Smallest interior angle (degrees) of triangles with corners A, B, C (k, 3)."""
     def ang(u, v):
-        return np.arctan2(_norm(np.cross(u, v)), _dot(u, v))
+        return np.arctan2(_norm(cross_rows(u, v)), _dot(u, v))
     a0 = ang(B - A, C - A)
     a1 = ang(C - B, A - B)
     return np.degrees(np.minimum(np.minimum(a0, a1), np.pi - a0 - a1))
@@ -117,7 +117,7 @@ def _tri_angles(P, F):
     A, B, C = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
 
     def ang(u, v):
-        return np.degrees(np.arctan2(_norm(np.cross(u, v)), _dot(u, v)))
+        return np.degrees(np.arctan2(_norm(cross_rows(u, v)), _dot(u, v)))
     a0 = ang(B - A, C - A)
     a1 = ang(C - B, A - B)
     return np.stack([a0, a1, 180.0 - a0 - a1], 1)
@@ -1212,12 +1212,11 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
     fn_old = _unit(_tri_normals(P, F))
     cos_turn = np.cos(np.radians(max_normal_turn))
 
-    def geometric(ci, dirn):
-        """rmax (inf where invalid) of collapsing cand[ci] in direction dirn."""
-        a = (u if dirn == 0 else v)[ci]
-        b = (v if dirn == 0 else u)[ci]
-        k = len(ci)
-        okd = dir_ok[ci, dirn].copy()
+    def geometric(a, b, okd):
+        """rmax (inf where invalid) of collapsing vertex ``a`` into ``b`` (arrays; ``okd``: the
+        collapses the cheap tests allow), each pair on its own."""
+        k = len(a)
+        okd = okd.copy()
         if not check_geometry:
             # only: no face around a may face against or stand across the input surface
             ow, pos = _expand(fptr, a)
@@ -1225,7 +1224,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             m = ~(Fa == b[ow][:, None]).any(1)
             ow, Fa = ow[m], Fa[m]
             Q = np.where((Fa == a[ow][:, None])[:, :, None], P[b[ow]][:, None, :], P[Fa])
-            nn = _unit(np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]))
+            nn = _unit(cross_rows(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]))
             Fb = np.where(Fa == a[ow][:, None], b[ow][:, None], Fa)
             badf = ~_facing_ok(W, ctx, Fb, nn)
             if (~badf).any():
@@ -1253,7 +1252,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         ow, ff, Fa, Q = ow[m], ff[m], Fa[m], Q0[m]
         isa = Fa == a[ow][:, None]
         Q = np.where(isa[:, :, None], P[b[ow]][:, None, :], Q)
-        nn = np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
+        nn = cross_rows(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
         area = _norm(nn)
         cosn = _dot(_unit(nn), fn_old[ff])
         cmin = np.full(k, np.inf)
@@ -1299,7 +1298,9 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         win = np.flatnonzero(alive & ~lose)
         if not len(win):
             break
-        sc = np.stack([geometric(win, 0), geometric(win, 1)], 1)
+        # both directions of every winner in one batch (u -> v first, then v -> u)
+        sc = geometric(np.concatenate([u[win], v[win]]), np.concatenate([v[win], u[win]]),
+                       np.concatenate([dir_ok[win, 0], dir_ok[win, 1]])).reshape(2, -1).T
         good = np.isfinite(sc).any(1)
         alive[win[~good]] = False
         win, sc = win[good], sc[good]
@@ -1355,12 +1356,12 @@ def _flip_round(W, ctx, mode):
     d = F[f1, (s1 + 2) % 3]
     ok = (c != d) & (T.lookup(c, d) < 0) & (W.fpatch[f0] == W.fpatch[f1])
     Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
-    n0 = _unit(np.cross(Pb - Pa, Pc - Pa))
-    n1 = _unit(np.cross(Pa - Pb, Pd - Pb))
+    n0 = _unit(cross_rows(Pb - Pa, Pc - Pa))
+    n1 = _unit(cross_rows(Pa - Pb, Pd - Pb))
     cosmax = np.cos(np.radians(ctx.max_flip_dihedral))
     ok &= _dot(n0, n1) > cosmax
-    m0 = _unit(np.cross(Pd - Pa, Pc - Pa))
-    m1 = _unit(np.cross(Pb - Pd, Pc - Pd))
+    m0 = _unit(cross_rows(Pd - Pa, Pc - Pa))
+    m1 = _unit(cross_rows(Pb - Pd, Pc - Pd))
     # the new pair must not fold over the old one (both new faces turn by less than the
     # allowed dihedral from both old faces)
     for mm in (m0, m1):

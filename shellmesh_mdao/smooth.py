@@ -61,7 +61,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .mesh import ShellMesh, vertex_faces
+from .mesh import ShellMesh, cross_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 
 __all__ = ["FIXED", "CURVE", "PLANE", "SURFACE", "KIND_NAMES", "Curve", "Supports", "derive_supports",
@@ -163,7 +163,7 @@ class _Surface:
     def __init__(self, locator: SurfaceLocator):
         self.loc = locator
         P, T = locator.points, locator.triangles
-        self.tri_n = _unit(np.cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
+        self.tri_n = _unit(cross_rows(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]))
         self._ctree = None
 
     def ctree(self):
@@ -544,10 +544,10 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
 # ============================================================================ element checks
 def _face_normals(P, faces, is_tri):
     c = P[np.where(faces >= 0, faces, faces[:, :1])]
-    v = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
+    v = cross_rows(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
     if is_tri.any():
         ct = c[is_tri]
-        v[is_tri] = np.cross(ct[:, 1] - ct[:, 0], ct[:, 2] - ct[:, 0])
+        v[is_tri] = cross_rows(ct[:, 1] - ct[:, 0], ct[:, 2] - ct[:, 0])
     return _unit(v)
 
 
@@ -563,7 +563,7 @@ def _min_corner_sj(P, faces, is_tri, nref=None):
         C = c[mask][:, :k]
         E = np.roll(C, -1, axis=1) - C                          # e_next at corner i
         Ep = np.roll(E, 1, axis=1)                              # -e_prev
-        cr = np.cross(Ep, E)
+        cr = cross_rows(Ep, E)
         L = np.linalg.norm(E, axis=2)
         den = L * np.roll(L, 1, axis=1)
         for nn in (nown[mask], None if nref is None else nref[mask]):
@@ -681,10 +681,10 @@ def _frames(mesh: ShellMesh, P, supports: Supports, vnormal):
 def _vertex_normals_and_curvature(P, faces, is_tri, n):
     """Area-weighted vertex normals and kappa_i = 1 - min over incident faces of n_i . n_f."""
     c = P[np.where(faces >= 0, faces, faces[:, :1])]
-    av = 0.5 * np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
+    av = 0.5 * cross_rows(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
     if is_tri.any():
         ct = c[is_tri]
-        av[is_tri] = 0.5 * np.cross(ct[:, 1] - ct[:, 0], ct[:, 2] - ct[:, 0])
+        av[is_tri] = 0.5 * cross_rows(ct[:, 1] - ct[:, 0], ct[:, 2] - ct[:, 0])
     valid = faces >= 0
     fi = np.broadcast_to(np.arange(len(faces))[:, None], faces.shape)[valid]
     vi = faces[valid]
@@ -824,7 +824,7 @@ class _Ortho:
     def __init__(self, P, faces, is_quad, scale):
         Q = faces[is_quad]
         C = P[Q]
-        nq = _unit(np.cross(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
+        nq = _unit(cross_rows(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
         self.b = Q.reshape(-1)
         self.a = np.roll(Q, 1, axis=1).reshape(-1)
         self.c = np.roll(Q, -1, axis=1).reshape(-1)
@@ -841,14 +841,14 @@ class _Ortho:
         su, sv = self.su[sel, None], self.sv[sel, None]
         if role == 0:
             return su * t
-        nx = np.cross(self.n[sel], t)
+        nx = cross_rows(self.n[sel], t)
         return -su * t + sv * nx if role == 1 else -sv * nx
 
     def gradient(self, x, n):
         """(n, 3) gradient of 1/2 sum w |r|^2 at positions x."""
-        r = self.su[:, None] * (x[self.a] - x[self.b]) - self.sv[:, None] * np.cross(self.n, x[self.c] - x[self.b])
+        r = self.su[:, None] * (x[self.a] - x[self.b]) - self.sv[:, None] * cross_rows(self.n, x[self.c] - x[self.b])
         wr = self.w[:, None] * r
-        nwr = np.cross(self.n, wr)                     # [n]x^T = -[n]x
+        nwr = cross_rows(self.n, wr)                     # [n]x^T = -[n]x
         ga = self.su[:, None] * wr
         gb = -self.su[:, None] * wr - self.sv[:, None] * nwr
         gc = self.sv[:, None] * nwr
