@@ -49,6 +49,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError, LayoutError, SizeError
+from .imprint import _closest_on_segments
 from .mesh import ShellMesh, vertex_faces
 from .section import Plane
 
@@ -988,7 +989,6 @@ def _plane_frame(m: _Member, P: np.ndarray, nodes: np.ndarray):
 def _arc_param(q: np.ndarray, poly: np.ndarray, closed: bool):
     """Arc-length parameter of the closest point on a polyline to each query point, and the
     polyline's cumulative lengths (:func:`~shellmesh_mdao.imprint._closest_on_segments`)."""
-    from .imprint import _closest_on_segments
     p = np.vstack([poly, poly[:1]]) if closed else poly
     L = np.linalg.norm(p[1:] - p[:-1], axis=1)
     cum = np.concatenate([[0.0], np.cumsum(L)])
@@ -1335,8 +1335,7 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
             raise ImprintError(f"member '{mems[cm[bad]].name}': chain edge {a_[bad]}-{b_[bad]} is not an edge between "
                                "two skin triangles; imprint the member again")
         f0, f1 = o[lo] // 3, o[lo + 1] // 3
-        # a fan of k pieces splits the skin angle opposite the edge into k: no fan angle below
-        # min_fan_angle (or, when that angle is already smaller, no split at all)
+        # no fan triangle below min_skin_angle, nor below the smallest angle of the face it replaces
         floor_ang = np.minimum(min_skin_angle, np.minimum(_tri_min_angles(P, F[f0]), _tri_min_angles(P, F[f1])))
         # a ladder split is taken as it is when its fans keep the floor below, else the edge
         # falls back to the even split
