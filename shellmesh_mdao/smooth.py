@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -1288,6 +1289,30 @@ def untangle(mesh: ShellMesh, supports: Supports, *, goal: float = 0.3, iteratio
 
 
 # ============================================================================ pipeline supports
+#: per input-skin locator: its plane sections as polylines, keyed by (point, normal) bytes
+_SECTIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def section_polylines(skin, point, normal) -> list:
+    """The section of the input skin (a :class:`~shellmesh_mdao.project.SurfaceLocator`) with
+    the plane through ``point`` with ``normal``, as ``(nodes, closed)`` polylines (read-only
+    arrays). Computed once per locator and plane: the split, merge and quad stages ask for the
+    same members' sections (the input skin never changes during a run)."""
+    from .section import Plane, plane_section
+
+    memo = _SECTIONS.setdefault(skin, {})
+    key = (np.asarray(point, np.float64).tobytes(), np.asarray(normal, np.float64).tobytes())
+    if key not in memo:
+        sec = plane_section(skin.points, skin.triangles, Plane.make(point, normal))
+        polys = []
+        for ix, cl in polylines_from_edges(sec.nodes, sec.links):
+            nodes = sec.nodes[ix]
+            nodes.setflags(write=False)
+            polys.append((nodes, cl))
+        memo[key] = polys
+    return list(memo[key])
+
+
 def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
     """Supports of the conforming skin + members mesh of the pipeline.
 
@@ -1301,8 +1326,6 @@ def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
     members, Coons patches) are fixed. Chain and junction vertices may slide
     (``sliding=True``); crossings, corners and curve ends stay fixed (:func:`derive_supports`).
     """
-    from .section import Plane, plane_section
-
     by_name = {m.name: m for m in (infos or [])}
     planes, owner = {}, {}
     for i, nm in enumerate(mesh.component_names):
@@ -1313,15 +1336,13 @@ def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
         owner[i] = inf
         if inf.plane_normal is not None:
             planes[i] = (inf.plane_point, inf.plane_normal)
-    P, T = skin.points, skin.triangles
     fe, fid = mesh.feature_edges, mesh.feature_edge_ids
     curves = {}
     for i in np.unique(fid).tolist():                      # loop over members (and -1)
         polys = []
         inf = owner.get(int(i))
         if inf is not None and inf.plane_normal is not None:
-            sec = plane_section(P, T, Plane.make(inf.plane_point, inf.plane_normal))
-            polys += [(sec.nodes[ix], cl) for ix, cl in polylines_from_edges(sec.nodes, sec.links)]
+            polys += section_polylines(skin, inf.plane_point, inf.plane_normal)
         polys += [(mesh.points[ix], cl) for ix, cl in polylines_from_edges(mesh.points, fe[fid == i])]
         curves[int(i)] = polys
     sup = derive_supports(mesh, skin, planes, curves, sliding=True)

@@ -208,6 +208,32 @@ def test_curve_and_polylines():
     assert got == [((0, 1, 2), False), ((2, 3), False), ((2, 4), False), ((5, 6, 7), True)]
 
 
+def test_section_polylines_cached_per_locator_and_plane():
+    """A member's plane section is computed once per input skin: the same polylines as a fresh
+    section (a unit cube cut at z = 0.3 is one closed square of perimeter 4), read-only, and a
+    second skin or plane gets its own."""
+    from shellmesh_mdao.section import Plane, plane_section
+    from shellmesh_mdao.smooth import section_polylines
+    box = trimesh.creation.box()
+    loc = SurfaceLocator(box.vertices, box.faces)
+    got = section_polylines(loc, [0, 0, 0.3], [0, 0, 1])
+    assert len(got) == 1 and got[0][1]
+    nodes = got[0][0]
+    assert np.allclose(nodes[:, 2], 0.3)
+    assert np.isclose(np.linalg.norm(np.diff(np.vstack([nodes, nodes[:1]]), axis=0), axis=1).sum(), 4.0)
+    sec = plane_section(loc.points, loc.triangles, Plane.make([0, 0, 0.3], [0, 0, 1]))
+    fresh = [(sec.nodes[ix], cl) for ix, cl in polylines_from_edges(sec.nodes, sec.links)]
+    assert len(fresh) == 1 and np.array_equal(fresh[0][0], nodes)
+    again = section_polylines(loc, [0, 0, 0.3], [0, 0, 1])
+    assert again[0][0] is nodes                                   # served from the cache
+    with pytest.raises(ValueError):
+        nodes[0, 0] = 1.0                                         # shared: nobody may edit it
+    other = section_polylines(loc, [0, 0, -0.2], [0, 0, 1])
+    assert np.allclose(other[0][0][:, 2], -0.2)
+    loc2 = SurfaceLocator(box.vertices * 2.0, box.faces)
+    assert np.isclose(np.abs(section_polylines(loc2, [0, 0, 0.3], [0, 0, 1])[0][0][:, 0]).max(), 1.0)
+
+
 # ------------------------------------------------------------------ corpus skins
 def _corpus_quads(geometry_dir, name, feature_deg=30.0):
     tm = trimesh.load(geometry_dir / f"{name}.stl", process=True)
