@@ -999,6 +999,38 @@ def _micro_round(W, ctx, eps):
     return _collapse_edges(W, ctx, T, cand, prio=-L[cand], check_geometry=False)
 
 
+def _across_ridge(ctx, pa, pb, mid, nrm, fn0, patch, pts, tri, ok):
+    """Split points of deviation splits of edges ``pa``-``pb`` whose closest point ``pts``
+    lands within a quarter of the edge of one of its ends, or that found no compatible
+    triangle (``ok`` False): an edge across a ridge narrower than itself (a dorsal fin, a
+    fairing) has its midpoint inside the ridge, closest to a wall at the edge's foot, and
+    splitting there does nothing. Such an edge takes the nearest surface point, within the
+    edge's length, on the line through its midpoint along the faces' mean normal ``nrm``
+    (for a folded pair, whose normals cancel, along the first face's in-plane direction
+    across the edge), in the same feature patch. Returns the updated ``(pts, tri, ok)``."""
+    L = _norm(pb - pa)
+    redo = np.flatnonzero((np.minimum(_norm(pts - pa), _norm(pts - pb)) <= 0.25 * L) | ~ok)
+    if not len(redo):
+        return pts, tri, ok
+    across = _unit(cross_rows(fn0[redo], _unit(pb[redo] - pa[redo])))
+    d = np.where((_norm(nrm[redo]) < 0.5)[:, None], across, _unit(nrm[redo]))
+    k = len(redo)
+    hit, htri, hd = ctx.loc.raycast(np.vstack([mid[redo], mid[redo]]), np.vstack([d, -d]))
+    hd = hd.reshape(2, k)
+    side = np.argmin(hd, axis=0)                      # the nearer of the two directions
+    j = side * k + np.arange(k)
+    dist = hd[side, np.arange(k)]
+    good = np.isfinite(dist) & (dist <= L[redo])
+    if ctx.use_patch:
+        good &= ctx.surf.tri_patch[np.maximum(htri[j], 0)] == patch[redo]
+    g = redo[good]
+    pts, tri, ok = pts.copy(), tri.copy(), ok.copy()
+    pts[g] = hit[j[good]]
+    tri[g] = htri[j[good]]
+    ok[g] = True
+    return pts, tri, ok
+
+
 def _split_round(W, ctx, forced=None, min_angle_guard=0.0):
     """Split, in one batch, the longest edges (> 4/3 local size), at most one per face
     (or the edges ``forced``)."""
@@ -1051,6 +1083,9 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0):
         fn = W.face_normals()
         nrm = fn[f0[rm]] + np.where((f1[rm] >= 0)[:, None], fn[np.maximum(f1[rm], 0)], 0.0)
         pts, tri, okr = ctx.project(mid, _unit(nrm), W.fpatch[f0[rm]])
+        if forced is not None:
+            pts, tri, okr = _across_ridge(ctx, P[a[rm]], P[b[rm]], mid, nrm, fn[f0[rm]],
+                                          W.fpatch[f0[rm]], pts, tri, okr)
         newP[rm] = pts
         newtri[rm] = tri
         ok[rm] = okr
@@ -1059,8 +1094,12 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0):
     ok &= np.minimum(_norm(newP - P[a]), _norm(newP - P[b])) > 0.25 * L[sel]
     if forced is not None and min_angle_guard > 0:
         # forced (deviation) splits: none of the four new triangles may fall below
-        # min(min_angle_guard, half the smallest angle of the triangle it replaces)
+        # min(min_angle_guard, half the smallest angle of the triangle it replaces), unless
+        # the edge is more than twice max_deviation off the input (faces spanning a ridge
+        # narrower than themselves, standing across it: their angles mean nothing there)
         F0 = W.F
+        _, _, dsel = ctx.loc.closest(0.5 * (P[a] + P[b]))
+        gross = dsel > 2.0 * ctx.delta
         for hh in (T.h0[sel], T.h1[sel]):
             valid = hh >= 0
             hv = np.maximum(hh, 0)
@@ -1069,7 +1108,7 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0):
             old = _tri_min_angle(P[va], P[vb], P[vc])
             new1 = _tri_min_angle(P[va], newP, P[vc])
             new2 = _tri_min_angle(newP, P[vb], P[vc])
-            ok &= ~valid | (np.minimum(new1, new2) >= np.minimum(min_angle_guard, 0.5 * old))
+            ok &= ~valid | gross | (np.minimum(new1, new2) >= np.minimum(min_angle_guard, 0.5 * old))
     if not ok.all():
         sel, f0, f1, a, b = sel[ok], f0[ok], f1[ok], a[ok], b[ok]
         newP, newkind, newS, newch, newtri = newP[ok], newkind[ok], newS[ok], newch[ok], newtri[ok]

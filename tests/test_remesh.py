@@ -138,6 +138,63 @@ def test_upper_and_lower_skins_not_stitched(corpus):
         assert s["deviation_vertices"] <= 1e-9 * skin.diagonal
 
 
+def _fin_strip(n_along: int = 20):
+    """An open inverted-U strip along x: walls at y = +-0.25 from z = 0 to 0.3, a crest at
+    z = 0.4 (a fin or fairing narrower than the edges that will cross it)."""
+    prof = np.array([[0.25, 0.0], [0.25, 0.3], [0.15, 0.4], [-0.15, 0.4], [-0.25, 0.3], [-0.25, 0.0]])
+    xs = np.linspace(-1.0, 1.0, n_along + 1)
+    P = np.array([[x, y, z] for x in xs for y, z in prof])
+    n = len(prof)
+    F = []
+    for i in range(n_along):
+        for j in range(n - 1):
+            a, b = i * n + j, i * n + j + 1
+            F += [[a, b, b + n], [a, b + n, a + n]]
+    return P, np.array(F)
+
+
+def test_split_across_a_narrow_ridge_lands_on_its_crest():
+    """An edge from one foot of a ridge to the other (a face standing across a dorsal fin
+    narrower than itself): its midpoint is inside the ridge and closest to a wall at the
+    edge's own end, so a split there would not split. ``_across_ridge`` takes the surface
+    point on the line through the midpoint across the edge instead: the crest, for a folded
+    pair (normals cancelling) as for an ordinary one; other edges keep their closest point."""
+    from shellmesh_mdao.remesh import _across_ridge, _Ctx
+    P, F = _fin_strip()
+    ctx = _Ctx(locator=SurfaceLocator(P, F))
+    pa = np.array([[0.0, 0.25, 0.0], [0.0, 0.25, 0.0], [0.5, 0.25, 0.0]])
+    pb = np.array([[0.0, -0.25, 0.0], [0.0, -0.25, 0.0], [0.5, 0.25, 0.3]])
+    mid = 0.5 * (pa + pb)
+    nrm = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0], [0.0, 2.0, 0.0]])   # folded pair, mean up, a wall
+    fn0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
+    pts, tri, _ = ctx.loc.closest(mid)
+    foot = np.minimum(np.linalg.norm(pts - pa, axis=1), np.linalg.norm(pts - pb, axis=1))
+    assert np.allclose(foot[:2], 0.0)                                   # the plain closest point: a foot
+    ok = np.ones(3, bool)
+    out, otri, ook = _across_ridge(ctx, pa, pb, mid, nrm, fn0, np.zeros(3, np.int64), pts, np.asarray(tri), ok)
+    assert np.allclose(out[:2], [[0.0, 0.0, 0.4], [0.0, 0.0, 0.4]])     # the crest
+    assert ook.all() and (otri[:2] >= 0).all()
+    assert np.allclose(out[2], pts[2])                                  # on the wall already: unchanged
+
+
+def test_edge_across_the_cessna_dorsal_fin_is_split(geometry_dir, manifest):
+    """cessna210 at target 0.789 (stress layout seed 77 at size 0.3945): the dorsal fin near
+    x = 16.8 is 0.5 wide and its faces stood across it (an edge midpoint 0.24 = 3.1 x
+    max_deviation off the input, one standing face); their nodes ended up to 0.24 off the
+    input in the final mesh. Splitting such edges at the crest, also below the 20-degree guard
+    when an edge is more than twice max_deviation off, leaves none."""
+    from shellmesh_mdao import pipeline as pl
+    from shellmesh_mdao.layout import layout_from_manifest
+    lay = layout_from_manifest(manifest, "cessna210", ribs=10, spars=(0.15, 0.65))
+    st = pl.run_pipeline(geometry_dir / manifest["geometries"]["cessna210"]["file"], lay, 0.394485,
+                         progress=False, until="project").state
+    target = 2.0 * 0.394485
+    rep = {}
+    remesh_skin(st.surface, target, max_deviation=0.1 * target, locator=st.locator, report=rep)
+    assert rep["n_standing_faces"] == 0
+    assert rep["deviation_edge_midpoints"] <= 1.25 * 0.1 * target
+
+
 def test_remesh_is_deterministic(geometry_dir, manifest):
     skin, _ = load_surface(geometry_dir / manifest["geometries"]["straight_wing"]["file"])
     a = remesh_skin(skin, 0.08)
