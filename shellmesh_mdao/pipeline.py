@@ -34,6 +34,10 @@ STAGES = ("load", "layout", "project", "remesh", "imprint", "members", "split", 
 #: Elements at or below this scaled Jacobian are reported (count, ids) and logged as a warning.
 POOR_JACOBIAN = 0.2
 
+#: Skin nodes farther than this fraction of the model's bounding-box diagonal from the input
+#: surface are reported (report key ``off_surface``) and logged as a warning.
+OFF_SURFACE_TOL = 1e-6
+
 #: The skin is remeshed at this multiple of the final quad size: merging pairs triangles into
 #: quads and the final subdivision halves every edge.
 REMESH_FACTOR = 2.0
@@ -347,7 +351,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     rings around them; report key ``poor_repair``), and what remains is reported and logged."""
     from .mesh import vertex_faces
     from .quad import subdivide_to_quads
-    from .smooth import _faces_of, smooth, untangle
+    from .smooth import SURFACE, _faces_of, smooth, untangle
 
     _need(state, "quad")
     o = state.options
@@ -384,6 +388,24 @@ def stage_quad(state: PipelineState) -> PipelineState:
         log.warning("%d element(s) with scaled Jacobian <= %.1f (min %.3f) in %s: they come from sliver triangles "
                     "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
                     len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
+    # skin nodes off the input surface: the subdivision keeps a new node at its linear position
+    # where projecting it would fold a child and the repair around it failed (a parent face across
+    # a crease or a ridge much tighter than the element size)
+    skin_nodes = np.flatnonzero(sup.kind == SURFACE)
+    d = np.zeros(0)
+    if len(skin_nodes):
+        x, _ = sup.project(q.points, skin_nodes)
+        d = np.linalg.norm(x - q.points[skin_nodes], axis=1)
+    off = d > OFF_SURFACE_TOL * q.diagonal
+    st.report["off_surface"] = {"count": int(off.sum()), "max_distance": float(d.max(initial=0.0)),
+                                "max_distance_over_size": float(d.max(initial=0.0) / state.size),
+                                "nodes": skin_nodes[off][:100].tolist()}
+    if off.any():
+        k = skin_nodes[off][np.argmax(d[off])]
+        log.warning("%d skin node(s) off the input surface, up to %.3g (%.2f element sizes) near %s: a face "
+                    "spanned a crease or ridge much tighter than the element size there; use a smaller --size "
+                    "or see the report's 'off_surface' (0-based ids)", int(off.sum()), float(d[off].max()),
+                    float(d[off].max() / state.size), np.array2string(q.points[k], precision=4))
     return st
 
 

@@ -90,6 +90,8 @@ def check_guarantees(res, input_closed=True, min_sj=0.2, free_edges=False, max_f
     # the elements around; where that repair stalls (a crease much tighter than the element
     # size) a few may stay at their linear position
     ds = d[sup.kind == SURFACE]
+    assert res.report["off_surface"]["count"] == int((ds > tol).sum()), "every skin node off the input is reported"
+    assert np.isclose(res.report["off_surface"]["max_distance"], ds.max(initial=0.0), rtol=1e-9, atol=1e-12)
     assert (ds <= tol).mean() >= 0.995 and ds.max() <= 5e-3 * q.diagonal
     assert (sup.kind == FIXED).sum() < max_fixed * q.n_points
     return eq
