@@ -1000,11 +1000,11 @@ def _micro_round(W, ctx, eps):
 
 
 def _across_ridge(ctx, pa, pb, mid, nrm, fn0, patch, pts, tri, ok):
-    """Split points of deviation splits of edges ``pa``-``pb`` whose closest point ``pts``
-    lands within a quarter of the edge of one of its ends, or that found no compatible
-    triangle (``ok`` False): an edge across a ridge narrower than itself (a dorsal fin, a
-    fairing) has its midpoint inside the ridge, closest to a wall at the edge's foot, and
-    splitting there does nothing. Such an edge takes the nearest surface point, within the
+    """Split points of forced splits (deviation splits, corner openings) of edges
+    ``pa``-``pb`` whose closest point ``pts`` lands within a quarter of the edge of one of its
+    ends, or that found no compatible triangle (``ok`` False); the split would be refused
+    there: an edge across a ridge narrower than itself (a dorsal fin, a fairing) has its
+    midpoint inside the ridge, closest to a wall at the edge's foot. Such an edge takes the nearest surface point, within the
     edge's length, on the line through its midpoint along the faces' mean normal ``nrm``
     (for a folded pair, whose normals cancel, along the first face's in-plane direction
     across the edge), in the same feature patch. Returns the updated ``(pts, tri, ok)``."""
