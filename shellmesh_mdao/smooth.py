@@ -1307,28 +1307,36 @@ def untangle(mesh: ShellMesh, supports: Supports, *, goal: float = 0.3, iteratio
 
 
 # ============================================================================ pipeline supports
-#: per input-skin locator: its plane sections as polylines, keyed by (point, normal) bytes
+#: per input-skin locator: its plane sections as polylines, keyed by (point, normal) bytes,
+#: the most recently used last
 _SECTIONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+#: planes kept per locator (a study keeps its loaded skin across runs while the rib and spar
+#: planes move: the oldest sections are dropped)
+SECTION_CACHE_SIZE = 256
 
 
 def section_polylines(skin, point, normal) -> list:
     """The section of the input skin (a :class:`~shellmesh_mdao.project.SurfaceLocator`) with
     the plane through ``point`` with ``normal``, as ``(nodes, closed)`` polylines (read-only
     arrays). Computed once per locator and plane: the split, merge and quad stages ask for the
-    same members' sections (the input skin never changes during a run)."""
+    same members' sections (the input skin never changes during a run). At most
+    :data:`SECTION_CACHE_SIZE` planes are kept per locator (least recently used dropped)."""
     from .section import Plane, plane_section
 
     memo = _SECTIONS.setdefault(skin, {})
     key = (np.asarray(point, np.float64).tobytes(), np.asarray(normal, np.float64).tobytes())
-    if key not in memo:
+    polys = memo.pop(key, None)
+    if polys is None:
         sec = plane_section(skin.points, skin.triangles, Plane.make(point, normal))
         polys = []
         for ix, cl in polylines_from_edges(sec.nodes, sec.links):
             nodes = sec.nodes[ix]
             nodes.setflags(write=False)
             polys.append((nodes, cl))
-        memo[key] = polys
-    return list(memo[key])
+    memo[key] = polys                                   # most recently used last
+    while len(memo) > SECTION_CACHE_SIZE:
+        memo.pop(next(iter(memo)))
+    return list(polys)
 
 
 def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:

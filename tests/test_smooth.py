@@ -256,6 +256,24 @@ def test_section_polylines_cached_per_locator_and_plane():
     assert np.isclose(np.abs(section_polylines(loc2, [0, 0, 0.3], [0, 0, 1])[0][0][:, 0]).max(), 1.0)
 
 
+def test_section_cache_is_bounded(monkeypatch):
+    """A study keeps its loaded skin while the member planes move from run to run: the cache
+    keeps the most recently used SECTION_CACHE_SIZE planes per locator, not every plane ever asked."""
+    import shellmesh_mdao.smooth as S
+    monkeypatch.setattr(S, "SECTION_CACHE_SIZE", 4)
+    box = trimesh.creation.box()
+    loc = SurfaceLocator(box.vertices, box.faces)
+    first = S.section_polylines(loc, [0, 0, 0.0], [0, 0, 1])
+    for z in np.linspace(-0.4, 0.4, 9):
+        S.section_polylines(loc, [0, 0, z], [0, 0, 1])
+        assert len(S._SECTIONS[loc]) <= 4
+        assert S.section_polylines(loc, [0, 0, 0.0], [0, 0, 1])[0][0] is first[0][0]   # in use: kept
+    for z in np.linspace(0.45, 0.49, 5):
+        S.section_polylines(loc, [0, 0, z], [0, 0, 1])
+    again = S.section_polylines(loc, [0, 0, 0.0], [0, 0, 1])                 # dropped, computed anew
+    assert again[0][0] is not first[0][0] and np.array_equal(again[0][0], first[0][0])
+
+
 # ------------------------------------------------------------------ corpus skins
 def _corpus_quads(geometry_dir, name, feature_deg=30.0):
     tm = trimesh.load(geometry_dir / f"{name}.stl", process=True)
