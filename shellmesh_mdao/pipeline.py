@@ -392,10 +392,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     # where projecting it would fold a child and the repair around it failed (a parent face across
     # a crease or a ridge much tighter than the element size)
     skin_nodes = np.flatnonzero(sup.kind == SURFACE)
-    d = np.zeros(0)
-    if len(skin_nodes):
-        x, _ = sup.project(q.points, skin_nodes)
-        d = np.linalg.norm(x - q.points[skin_nodes], axis=1)
+    d = sup.distance(q.points, skin_nodes) if len(skin_nodes) else np.zeros(0)
     off = d > OFF_SURFACE_TOL * q.diagonal
     st.report["off_surface"] = {"count": int(off.sum()), "max_distance": float(d.max(initial=0.0)),
                                 "max_distance_over_size": float(d.max(initial=0.0) / state.size),

@@ -1004,8 +1004,9 @@ def _across_ridge(ctx, pa, pb, mid, nrm, fn0, patch, pts, tri, ok):
     ``pa``-``pb`` whose closest point ``pts`` lands within a quarter of the edge of one of its
     ends, or that found no compatible triangle (``ok`` False); the split would be refused
     there: an edge across a ridge narrower than itself (a dorsal fin, a fairing) has its
-    midpoint inside the ridge, closest to a wall at the edge's foot. Such an edge takes the nearest surface point, within the
-    edge's length, on the line through its midpoint along the faces' mean normal ``nrm``
+    midpoint inside the ridge, closest to a wall at the edge's foot. Such an edge takes the
+    nearest surface point, within the edge's length, on the line through its midpoint along
+    the faces' mean normal ``nrm``
     (for a folded pair, whose normals cancel, along the first face's in-plane direction
     across the edge), in the same feature patch. Returns the updated ``(pts, tri, ok)``."""
     L = _norm(pb - pa)
@@ -1031,9 +1032,10 @@ def _across_ridge(ctx, pa, pb, mid, nrm, fn0, patch, pts, tri, ok):
     return pts, tri, ok
 
 
-def _split_round(W, ctx, forced=None, min_angle_guard=0.0):
+def _split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
     """Split, in one batch, the longest edges (> 4/3 local size), at most one per face
-    (or the edges ``forced``)."""
+    (or the edges ``forced``; ``deviation``: the distance of every edge's midpoint to the
+    input, when the caller has it)."""
     T = W.topo()
     E = T.E
     P = W.P
@@ -1098,7 +1100,7 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0):
         # the edge is more than twice max_deviation off the input (faces spanning a ridge
         # narrower than themselves, standing across it: their angles mean nothing there)
         F0 = W.F
-        _, _, dsel = ctx.loc.closest(0.5 * (P[a] + P[b]))
+        dsel = deviation[sel] if deviation is not None else ctx.loc.closest(0.5 * (P[a] + P[b]))[2]
         gross = dsel > 2.0 * ctx.delta
         for hh in (T.h0[sel], T.h1[sel]):
             valid = hh >= 0
@@ -1899,7 +1901,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         over = np.flatnonzero((dm > delta) & (L > 2.0 * h_min))
         if not len(over):
             break
-        k = _split_round(W, ctx, forced=over, min_angle_guard=20.0)
+        k = _split_round(W, ctx, forced=over, min_angle_guard=20.0, deviation=dm)
         n_dev_splits += k
         W.h = ctx.sizing(W)
         _phase(_flip_round, W, ctx, 5, "angle")

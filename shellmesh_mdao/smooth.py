@@ -109,11 +109,6 @@ def _pair_keys(pairs: np.ndarray, n: int) -> np.ndarray:
 
 
 # ============================================================================ supports
-#: Curve.closest compares every point with every segment up to this many pairs (cheaper than
-#: the KD-tree's per-point candidate lists for the short curves and small batches of smoothing)
-_BRUTE_PAIRS = 200_000
-
-
 class Curve:
     """A polyline support: ``points`` (k, 3); ``closed`` joins the last point to the first.
     Closest-point queries are vectorised (KD-tree of segment midpoints, built once)."""
@@ -146,19 +141,6 @@ class Curve:
         q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, 3))
         if not len(q):
             return np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-        ns = len(self._L)
-        if len(q) * ns <= _BRUTE_PAIRS:
-            # few pairs: every segment for every point (the same arithmetic as below, so the
-            # same result: the smallest distance, ties to the lowest segment)
-            a, ab = self._a[None, :, :], self._ab[None, :, :]
-            t = np.clip(np.einsum("qsj,qsj->qs", q[:, None, :] - a, np.broadcast_to(ab, (len(q), ns, 3)))
-                        / (self._L ** 2)[None, :], 0.0, 1.0)
-            x = a + t[:, :, None] * ab
-            diff = x - q[:, None, :]
-            dist = np.sqrt(np.einsum("qsj,qsj->qs", diff, diff))
-            pick = np.argmin(dist, axis=1)
-            r = np.arange(len(q))
-            return x[r, pick], dist[r, pick], self._ab[pick] / self._L[pick, None]
         d0, _ = self._tree.query(q)
         cand = self._tree.query_ball_point(q, d0 + 0.5 * self._L.max() * (1 + 1e-9) + 1e-300)
         cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
@@ -344,11 +326,12 @@ class Supports:
         nrm = None if normals is None else np.asarray(normals)[idx]
         return self.project_kind(np.asarray(points)[idx], self.kind[idx], self.ref[idx], nrm, min_dot)
 
-    def distance(self, points) -> np.ndarray:
-        """Distance of each vertex from its support (0 for FIXED vertices)."""
+    def distance(self, points, idx=None) -> np.ndarray:
+        """Distance of each vertex ``idx`` (default all) from its support (0 for FIXED vertices);
+        ``points`` is the full (n, 3) array."""
         p = np.asarray(points, np.float64)
-        x, _ = self.project(p)
-        return _norm(x - p)
+        x, _ = self.project(p, idx)
+        return _norm(x - (p if idx is None else p[np.asarray(idx, np.int64)]))
 
 
 def polylines_from_edges(points, edges) -> list:

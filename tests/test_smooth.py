@@ -208,28 +208,6 @@ def test_curve_and_polylines():
     assert got == [((0, 1, 2), False), ((2, 3), False), ((2, 4), False), ((5, 6, 7), True)]
 
 
-def test_curve_closest_brute_force_equals_tree(monkeypatch):
-    """Curve.closest compares all pairs for small batches and uses its KD-tree candidates
-    otherwise: both give the same points, distances and tangents bit for bit, ties included
-    (query points on vertices and segment midpoints)."""
-    import shellmesh_mdao.smooth as S
-    rng = np.random.default_rng(0)
-    for trial in range(60):
-        k = int(rng.integers(2, 40))
-        pts = np.cumsum(rng.normal(size=(k, 3)), 0)
-        if trial % 3 == 0:
-            pts = np.round(pts, 1)
-        c = Curve(pts, closed=bool(trial % 2))
-        q = np.vstack([rng.normal(size=(int(rng.integers(1, 30)), 3)) * 3, pts[:4],
-                       0.5 * (pts[:-1] + pts[1:])])
-        monkeypatch.setattr(S, "_BRUTE_PAIRS", 10 ** 9)
-        brute = c.closest(q)
-        monkeypatch.setattr(S, "_BRUTE_PAIRS", 0)
-        tree = c.closest(q)
-        for u, v in zip(brute, tree):
-            assert np.array_equal(u, v)
-
-
 def test_section_polylines_cached_per_locator_and_plane():
     """A member's plane section is computed once per input skin: the same polylines as a fresh
     section (a unit cube cut at z = 0.3 is one closed square of perimeter 4), read-only, and a
