@@ -211,7 +211,7 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     # local edge length per vertex of the region: its shortest incident region edge
     rt = T[region]
     rb = np.roll(rt, -1, axis=1)
-    el = np.linalg.norm(P[rt] - P[rb], axis=1).ravel()
+    el = np.linalg.norm(P[rt] - P[rb], axis=2).ravel()
     vmin = np.full(len(P), np.inf)
     np.minimum.at(vmin, rt.ravel(), el)
     np.minimum.at(vmin, rb.ravel(), el)
@@ -228,11 +228,14 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     sgn[on_plane] = 0.0
     close = rv[(np.abs(d[rv]) <= snap * h) & movable[rv] & inside[rv]]
     sgn[close] = 0.0
-    # never three zero corners in one triangle: un-snap the farthest snapped corner
+    # never three zero corners in one triangle: un-snap the farthest snapped corner. Every
+    # triangle around a snapped vertex counts, also one outside the region (beside the cut,
+    # its third corner already on the plane): an all-zero face breaks the chain there
     snapped = np.zeros(len(P), bool)
     snapped[close] = True
+    near = T[snapped[T].any(1)]
     for _ in range(10):
-        allz = rt[(sgn[rt] == 0).all(1)]
+        allz = near[(sgn[near] == 0).all(1)]
         if not len(allz):
             break
         cand = np.where(snapped[allz], np.abs(d[allz]), -1.0)
