@@ -75,6 +75,35 @@ def _tri_angles_min(P, T):
     return _angles3(P[np.asarray(T)[:, :3]])
 
 
+def _snap_keeps_star(P, T, v, x, min_angle: float = 1.0):
+    """Whether moving vertex ``v`` to ``x`` leaves every triangle around it unfolded (normal
+    within 90 degrees of its old one) and with all angles above ``min_angle`` degrees (or
+    above its own smallest angle before the move). A crossing point lying on an edge
+    opposite ``v`` (a point on a sharp trailing edge next to a skin vertex) would otherwise
+    turn that triangle into a zero-area sliver."""
+    star = T[(T == v).any(1)]
+    if not len(star):
+        return True
+    Q = P.copy()
+    Q[v] = x
+
+    def normals_angles(X):
+        a, b, c = X[star[:, 0]], X[star[:, 1]], X[star[:, 2]]
+        n = cross_rows(b - a, c - a)
+        ang = []
+        for p, q, r in ((a, b, c), (b, c, a), (c, a, b)):
+            u, w = q - p, r - p
+            cosv = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1),
+                                                               1e-300)
+            ang.append(np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0))))
+        return n, np.min(ang, axis=0)
+
+    n0, a0 = normals_angles(P)
+    n1, a1 = normals_angles(Q)
+    unfolded = np.einsum("ij,ij->i", n0, n1) > 0
+    return bool((unfolded & (a1 >= np.minimum(min_angle, a0))).all())
+
+
 def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, movable: np.ndarray,
                  snap: float = 0.3):
     """Insert the surface point ``x`` as a vertex of the triangle mesh (P, T).
@@ -102,7 +131,7 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
     dv = np.linalg.norm(P[tri] - x, axis=1)
     order = np.argsort(dv, kind="stable")
     for i in order:
-        if dv[i] <= snap * L and movable[tri[i]]:
+        if dv[i] <= snap * L and movable[tri[i]] and _snap_keeps_star(P, T, int(tri[i]), x):
             P = P.copy()
             P[tri[i]] = x
             return P, T, comp, int(tri[i])

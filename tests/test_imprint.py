@@ -123,6 +123,34 @@ def test_closest_on_polyline_brute_force():
 
 
 
+def test_insert_point_never_snaps_a_vertex_onto_its_opposite_edge():
+    """A crossing point on an edge (a rib crossing a sharp trailing edge) next to a free skin
+    vertex: moving that vertex onto the point would flatten the triangle between them to zero
+    area (bwb stress seed 24: degenerate skin triangles, then folded quads); the edge is split
+    instead. A point away from any edge still takes the nearby vertex."""
+    from shellmesh_mdao.imprint import insert_point
+    from shellmesh_mdao.quality import element_quality
+
+    P = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.1, 0], [0.5, -1, 0], [0.5, 1, 0]], float)
+    A, B, V, W, U = range(5)
+    T = np.array([[A, B, V], [A, W, B], [A, V, U], [V, B, U]])
+    C = np.zeros(len(T), np.int32)
+    movable = np.array([False, False, True, True, True])
+    x = np.array([0.45, 1e-9, 0.0])                  # inside (A, B, V), on its edge A-B to rounding
+    P2, T2, C2, vid = insert_point(P, T, C, x, movable)
+    assert vid == len(P) and np.allclose(P2[vid], x)  # a new vertex, not V moved
+    assert np.array_equal(P2[:len(P)], P)
+    assert insert_point.last_split == (A, B)
+    q = element_quality(P2, np.hstack([T2, -np.ones((len(T2), 1), np.int64)]))
+    assert q["min_angle"].min() > 5.0
+    area = np.cross(P2[T2[:, 1]] - P2[T2[:, 0]], P2[T2[:, 2]] - P2[T2[:, 0]])[:, 2]
+    assert (area > 0).all() and np.isclose(0.5 * area.sum(), 0.5 * 1 * 2)
+    # a point in the middle of the triangle, close to V: V is moved there
+    y = np.array([0.5, 0.07, 0.0])
+    P3, T3, _, vid3 = insert_point(P, T, C, y, movable)
+    assert vid3 == V and np.allclose(P3[V], y) and np.array_equal(T3, T)
+
+
 def _snap_fixture():
     """A flat strip cut by the plane x = 0. M1 (0.1 of its shortest edge off the plane) and M2
     (0.16) are within the snap distance; Q lies exactly on the plane. The thin triangle
