@@ -351,7 +351,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     rings around them; report key ``poor_repair``), and what remains is reported and logged."""
     from .mesh import vertex_faces
     from .quad import subdivide_to_quads
-    from .smooth import SURFACE, _faces_of, smooth, untangle
+    from .smooth import SURFACE, _face_rings, smooth, untangle
 
     _need(state, "quad")
     o = state.options
@@ -365,8 +365,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
         # last resort: move the vertices within two rings of the poor elements along their supports
         # (smooth.untangle: no element at or below the goal gets worse, none above falls to it)
         vptr, vface = vertex_faces(q.faces, q.n_points)
-        region = _faces_of(vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), q.n_faces)
-        region = _faces_of(vptr, vface, np.unique(q.faces[region][q.faces[region] >= 0]), q.n_faces)
+        region = _face_rings(q.faces, vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), 2)
         q2, info = untangle(q, sup, goal=POOR_JACOBIAN + 0.1, faces=region)
         sj2 = scaled_jacobian(q2.points, q2.faces)
         repair = {"elements_before": int(len(poor)), "elements_after": int((sj2 <= POOR_JACOBIAN).sum()),

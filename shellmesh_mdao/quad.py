@@ -33,7 +33,7 @@ import numpy as np
 
 from .errors import MeshValidationError
 from .mesh import ShellMesh, vertex_faces
-from .smooth import (CURVE, FIXED, SURFACE, Supports, _face_normals, _face_quality, _faces_of, _min_corner_sj,
+from .smooth import (CURVE, FIXED, SURFACE, Supports, _face_normals, _face_quality, _face_rings, _min_corner_sj,
                      untangle)
 
 __all__ = ["subdivide_to_quads", "subdivide_faces"]
@@ -117,8 +117,7 @@ def _settle(mesh: ShellMesh, supports: Supports, nodes, X_proj, parent_normal, t
                    mesh.feature_edges, mesh.feature_edge_ids)
     # the faces around the projected nodes (two rings: room for the tangential moves)
     vptr, vface = vertex_faces(F, len(Pg))
-    region = _faces_of(vptr, vface, np.asarray(nodes, np.int64), len(F))
-    region = _faces_of(vptr, vface, np.unique(F[region][F[region] >= 0]), len(F))
+    region = _face_rings(F, vptr, vface, nodes, 2)
     m2, _ = untangle(m1, supports, goal=goal, iterations=iterations, faces=region, ref_normals=nref)
     P2 = m2.points.copy()
     while True:

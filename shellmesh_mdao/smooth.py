@@ -771,6 +771,16 @@ def _faces_of(ptr, vf, verts, m):
     return np.flatnonzero(mask)
 
 
+def _face_rings(faces, ptr, vf, verts, rings: int = 2):
+    """Sorted ids of the faces within ``rings`` rings of ``verts``: the faces incident to
+    them, then (``rings`` >= 2) the faces incident to those faces' vertices, and so on."""
+    region = _faces_of(ptr, vf, np.asarray(verts, np.int64), len(faces))
+    for _ in range(rings - 1):
+        v = faces[region]
+        region = _faces_of(ptr, vf, np.unique(v[v >= 0]), len(faces))
+    return region
+
+
 class _Linear:
     """Solver of the reduced system H u = b: sparse LU (factorised once, reused for every
     right-hand side) or Jacobi-preconditioned conjugate gradients on the same matrix."""
