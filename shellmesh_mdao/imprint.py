@@ -31,7 +31,8 @@ from .errors import ImprintError
 from .mesh import ShellMesh, cross_rows, vertex_faces
 from .section import Plane, SectionArc, section_arc
 
-__all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain"]
+__all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain",
+           "split_member_bridges"]
 
 
 @dataclass
@@ -597,6 +598,48 @@ def _split_edges_between(P, T, C, verts, locator):
     P = np.vstack([P, mid])
     T, C = _split_hanging(P, T, C, e, new_id)
     return P, T, C, (e, new_id)
+
+
+def split_member_bridges(mesh: ShellMesh, chains, locator) -> ShellMesh:
+    """Split every skin edge that joins two vertices of the same member's chains without being
+    one of its chain edges (a *bridge*), at its midpoint projected onto the input surface.
+
+    A member is meshed on its chain vertices; where two of them are also joined by a skin
+    edge (a spar a fraction of an element behind a rounded leading edge: its upper and lower
+    lines one skin edge apart around the nose; the upper and lower crossing of a rib with it),
+    the member mesh may use the same segment, which then carries two skin faces and the
+    member's own two (or a rib's too): not a junction, and not a valid shell mesh. After the
+    split the two vertices are two edges apart. Feature edges lying on a split edge are split
+    with it; chain vertex lists are unchanged (new vertices are appended)."""
+    P, T, C = mesh.points, mesh.faces[:, :3], mesh.component
+    if not len(chains) or not len(T):
+        return mesh
+    members = sorted({c.member for c in chains})
+    col = {m: i for i, m in enumerate(members)}
+    rows = np.concatenate([np.asarray(c.vertices, np.int64) for c in chains])
+    cols = np.concatenate([np.full(len(c.vertices), col[c.member], np.int64) for c in chains])
+    on = np.zeros((len(P), len(members)), bool)
+    on[rows, cols] = True
+    a, b = T.ravel(), np.roll(T, -1, axis=1).ravel()
+    e = np.unique(np.sort(np.stack([a, b], 1), axis=1), axis=0)
+    cand = e[on[e[:, 0]].any(1) & on[e[:, 1]].any(1)]
+    if not len(cand):
+        return mesh
+    fe = np.sort(np.asarray(mesh.feature_edges, np.int64).reshape(-1, 2), axis=1)
+    fid = np.asarray(mesh.feature_edge_ids)
+    n = len(P)
+    # chain edges (feature edges tagged with a member's component id) stay
+    chain_keys = fe[fid >= 0, 0] * n + fe[fid >= 0, 1]
+    bridge = (on[cand[:, 0]] & on[cand[:, 1]]).any(1) & ~np.isin(cand[:, 0] * n + cand[:, 1], chain_keys)
+    split = cand[bridge]
+    if not len(split):
+        return mesh
+    mid = locator.closest(0.5 * (P[split[:, 0]] + P[split[:, 1]]))[0]
+    new_id = n + np.arange(len(split))
+    P2 = np.vstack([P, mid])
+    T2, C2 = _split_hanging(P2, T, C, split, new_id)
+    fe2, fid2 = _split_feature_edges(fe, fid, split, new_id) if len(fe) else (fe, fid)
+    return ShellMesh(P2, T2, C2, list(mesh.component_names), mesh.fixed_vertices, fe2, fid2)
 
 
 def _arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps):

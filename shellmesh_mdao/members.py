@@ -1734,7 +1734,36 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
     sf = np.hstack([F, np.full((len(F), 1), -1, np.int64)])
     faces = np.vstack([sf, np.hstack([mf, np.full((len(mf), 1), -1, np.int64)])])
     comp = np.concatenate([C] + comp_parts)
-    return ShellMesh(points, faces, comp, comp_names, np.concatenate(fixed), np.vstack(fe), np.concatenate(fid))
+    out = ShellMesh(points, faces, comp, comp_names, np.concatenate(fixed), np.vstack(fe), np.concatenate(fid))
+    _check_junction_edges(out, [m.name for m in mems])
+    return out
+
+
+def _check_junction_edges(mesh: ShellMesh, member_names) -> None:
+    """Every edge with a skin face has at most two skin faces (one on an open boundary) and at
+    most one member face (a chain edge); an edge without skin faces has at most four (two
+    members crossing). Anything else
+    (a member's own mesh running along a skin edge, found on a spar a fraction of an element
+    behind a rounded leading edge) is not a shell mesh: an :class:`ImprintError` naming the
+    member and the place, instead of a mesh no solver can use."""
+    topo = mesh.topology()
+    names = set(member_names)
+    is_mem = np.array([nm.split("/seg_")[0] in names for nm in mesh.component_names], bool)
+    fm = is_mem[mesh.component[topo.he_face]]
+    ne = len(topo.edges)
+    n_mem = np.bincount(topo.he_edge, weights=fm, minlength=ne).astype(np.int64)
+    n_skin = topo.valence - n_mem
+    bad = np.flatnonzero(((n_skin > 0) & ((n_skin > 2) | (n_mem > 1))) | ((n_skin == 0) & (topo.valence > 4)))
+    if not len(bad):
+        return
+    e = int(bad[0])
+    fs = topo.edge_faces[topo.edge_faces_ptr[e]:topo.edge_faces_ptr[e + 1]]
+    who = sorted({mesh.component_names[c] for c in mesh.component[fs] if is_mem[c]})
+    where = np.array2string(mesh.points[topo.edges[e]].mean(0), precision=4)
+    raise ImprintError(f"{', '.join(who) or 'a member'}: {len(bad)} edge(s) where the member mesh runs along a skin "
+                       f"edge or more than two members meet (first near {where}); the member is closer to a sharp "
+                       "or rounded edge of the skin, or to another member, than the element size there: move it "
+                       "or use a smaller --size")
 
 
 def _piece_names(m: _Member, gtris, inner_lines, points, n_nodes, split: bool):

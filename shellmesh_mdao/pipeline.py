@@ -259,13 +259,14 @@ def stage_remesh(state: PipelineState) -> PipelineState:
 
 def stage_imprint(state: PipelineState) -> PipelineState:
     """Imprint every member's curves into the skin as chains of edges; name the skin bays."""
-    from .imprint import coarsen_chains, improve_skin, imprint_chains, skin_families
+    from .imprint import coarsen_chains, improve_skin, imprint_chains, skin_families, split_member_bridges
 
     _need(state, "imprint")
     P, T = state.surface.points, state.surface.faces[:, :3]
     mesh, chains = imprint_chains(state.mesh, P, T, state.specs, locator=state.locator)
     mesh = improve_skin(mesh, state.locator, chains)
     mesh = coarsen_chains(mesh, state.locator, chains, REMESH_FACTOR * state.size)
+    mesh = split_member_bridges(mesh, chains, state.locator)
     mesh = skin_families(mesh, state.layout)
     st = state.but(mesh=mesh, chains=chains, stage="imprint")
     members: dict = {}

@@ -284,3 +284,45 @@ def test_coarsen_chains_deterministic(coarsened):
     assert np.array_equal(co.points, co2.points) and np.array_equal(co.faces, co2.faces)
     assert np.array_equal(co.feature_edges, co2.feature_edges)
     assert all(np.array_equal(a.vertices, b.vertices) for a, b in zip(res2, res3))
+
+
+def test_split_member_bridges():
+    """A skin edge joining two vertices of the same member's chains that is not one of its chain
+    edges (a spar's upper and lower line one skin edge apart around a rounded leading edge) is
+    split at its midpoint on the input surface: afterwards no such edge is left, chain edges and
+    other feature edges are kept (a split feature edge as two), the skin keeps its area and
+    orientation, and chain vertex ids are unchanged."""
+    from shellmesh_mdao.imprint import ChainResult, split_member_bridges
+    from shellmesh_mdao.mesh import ShellMesh
+    from shellmesh_mdao.project import SurfaceLocator
+
+    # two rows of a flat strip: the bottom row is the member's 'lower' chain, the top row its
+    # 'upper' chain; every edge between the rows is a bridge except the feature edge 2-5
+    x = np.arange(3.0)
+    P = np.vstack([np.stack([x, 0 * x, 0 * x], 1), np.stack([x, 0 * x + 0.5, 0 * x], 1),
+                   [[0.0, 1.5, 0.0], [2.0, 1.5, 0.0]]])
+    T = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [3, 4, 6], [4, 7, 6], [4, 5, 7]])
+    names = ["skin", "wing/spar_0"]
+    fe = np.array([[0, 1], [1, 2], [3, 4], [4, 5], [2, 5]])
+    fid = np.array([1, 1, 1, 1, -1], np.int32)
+    mesh = ShellMesh(P, T, np.zeros(len(T), np.int32), names, np.arange(6), fe, fid)
+    chains = [ChainResult("wing/spar_0", "lower", np.array([0, 1, 2])),
+              ChainResult("wing/spar_0", "upper", np.array([3, 4, 5]))]
+    out = split_member_bridges(mesh, chains, SurfaceLocator(P, T))
+    assert out.n_points == len(P) + 5                    # 0-3, 0-4, 1-4, 1-5 and the feature edge 2-5
+    on = np.zeros(out.n_points, bool)
+    on[:6] = True
+    chain_e = {(0, 1), (1, 2), (3, 4), (4, 5)}
+    for a, b in out.topology().edges.tolist():
+        assert not (on[a] and on[b]) or (a, b) in chain_e, (a, b)
+    assert np.isclose(out.face_areas().sum(), mesh.face_areas().sum())
+    n = np.cross(out.points[out.faces[:, 1]] - out.points[out.faces[:, 0]],
+                 out.points[out.faces[:, 2]] - out.points[out.faces[:, 0]])
+    assert (n[:, 2] > 0).all() and out.check().ok
+    got = {tuple(e): int(i) for e, i in zip(out.feature_edges.tolist(), out.feature_edge_ids.tolist())}
+    for e in chain_e:
+        assert got[e] == 1
+    m25 = [e for e in got if got[e] == -1]
+    assert len(m25) == 2 and all(2 in e or 5 in e for e in m25)   # the feature edge 2-5, split in two
+    # nothing to split: the same mesh back
+    assert split_member_bridges(out, chains, SurfaceLocator(P, T)) is out

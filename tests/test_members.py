@@ -570,3 +570,24 @@ def test_corpus_members(manifest, geometry_dir, spars):
         except (AssertionError, ShellMeshError) as e:
             failures.append(f"{name}: {type(e).__name__}: {e}")
     assert not failures, "\n".join(failures)
+
+
+def test_member_mesh_along_a_skin_edge_is_an_imprint_error():
+    """The members stage's last check: a skin edge that also carries two faces of one member
+    (its web running along the skin, as on bwb stress seed 148 before the imprint split such
+    bridges) is refused with the member's name and the place; a chain edge (two skin faces, one
+    member face) and an X-junction line (two members, two faces each) pass."""
+    from shellmesh_mdao.members import _check_junction_edges
+
+    P = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1], [0.5, 0, -1]], float)
+    names = ["skin", "wing/spar_0", "wing/rib_0/seg_0", "wing/rib_0/seg_1"]
+
+    def mesh(faces, comp):
+        F = np.hstack([np.asarray(faces), -np.ones((len(faces), 1), np.int64)])
+        return ShellMesh(P, F, np.asarray(comp, np.int32), names)
+
+    members = ["wing/spar_0", "wing/rib_0"]
+    _check_junction_edges(mesh([[0, 1, 2], [1, 0, 3], [0, 1, 4]], [0, 0, 1]), members)          # chain edge
+    _check_junction_edges(mesh([[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 0, 5]], [1, 1, 2, 3]), members)  # X line
+    with pytest.raises(ImprintError, match=r"wing/spar_0: 1 edge\(s\) where the member mesh runs along a skin edge"):
+        _check_junction_edges(mesh([[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 0, 5]], [0, 0, 1, 1]), members)
