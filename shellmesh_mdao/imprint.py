@@ -88,20 +88,11 @@ def _snap_keeps_star(P, T, v, x, min_angle: float = 1.0):
     Q = P.copy()
     Q[v] = x
 
-    def normals_angles(X):
-        a, b, c = X[star[:, 0]], X[star[:, 1]], X[star[:, 2]]
-        n = cross_rows(b - a, c - a)
-        ang = []
-        for p, q, r in ((a, b, c), (b, c, a), (c, a, b)):
-            u, w = q - p, r - p
-            cosv = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1),
-                                                               1e-300)
-            ang.append(np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0))))
-        return n, np.min(ang, axis=0)
+    def normals(X):
+        return cross_rows(X[star[:, 1]] - X[star[:, 0]], X[star[:, 2]] - X[star[:, 0]])
 
-    n0, a0 = normals_angles(P)
-    n1, a1 = normals_angles(Q)
-    unfolded = np.einsum("ij,ij->i", n0, n1) > 0
+    unfolded = np.einsum("ij,ij->i", normals(P), normals(Q)) > 0
+    a0, a1 = _tri_angles_min(P, star), _tri_angles_min(Q, star)
     return bool((unfolded & (a1 >= np.minimum(min_angle, a0))).all())
 
 

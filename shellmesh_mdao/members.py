@@ -1742,10 +1742,10 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
 def _check_junction_edges(mesh: ShellMesh, member_names) -> None:
     """Every edge with a skin face has at most two skin faces (one on an open boundary) and at
     most one member face (a chain edge); an edge without skin faces has at most four (two
-    members crossing). Anything else
-    (a member's own mesh running along a skin edge, found on a spar a fraction of an element
-    behind a rounded leading edge) is not a shell mesh: an :class:`ImprintError` naming the
-    member and the place, instead of a mesh no solver can use."""
+    members crossing). Anything else (a member's own mesh running along a skin edge, found on
+    a spar a fraction of an element behind a rounded leading edge) is not a shell mesh: an
+    :class:`ImprintError` naming the member and the place, instead of a mesh no solver can
+    use."""
     topo = mesh.topology()
     names = set(member_names)
     is_mem = np.array([nm.split("/seg_")[0] in names for nm in mesh.component_names], bool)
