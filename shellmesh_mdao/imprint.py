@@ -32,7 +32,7 @@ from .mesh import ShellMesh, cross_rows, vertex_faces
 from .section import Plane, SectionArc, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain",
-           "split_member_bridges"]
+           "refine_chains", "split_member_bridges"]
 
 
 @dataclass
@@ -589,6 +589,73 @@ def _split_edges_between(P, T, C, verts, locator):
     P = np.vstack([P, mid])
     T, C = _split_hanging(P, T, C, e, new_id)
     return P, T, C, (e, new_id)
+
+
+def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4) -> ShellMesh:
+    """Split chain edges whose exact arc bulges more than ``max_deviation`` from the chord, at
+    the arc point farthest from it (on the input surface and the member plane); both skin
+    triangles on the edge are split, and a feature edge on it becomes two. Up to ``rounds``
+    passes. Open chains only (a closed loop's chain is left as it is). Each chain's
+    ``vertices`` is updated in place (new vertices appended to the mesh, inserted in order);
+    new vertices are fixed.
+
+    A chain whose vertices are snapped skin vertices has chords as long as the skin's edges;
+    on a curved section they cut off area (bwb's thin outer wing: a rib 1.05 % smaller than
+    its exact section). The pipeline runs this when the solver option ``chain_deviation`` is
+    above 0 (a fraction of the remesh edge length; off by default)."""
+    P, T, C = mesh.points.copy(), mesh.faces[:, :3].copy(), mesh.component.copy()
+    fe = np.sort(np.asarray(mesh.feature_edges, np.int64).reshape(-1, 2), axis=1)
+    fid = np.asarray(mesh.feature_edge_ids).copy()
+    fixed = list(np.asarray(mesh.fixed_vertices, np.int64))
+    for _ in range(rounds):
+        edges, xs, where = [], [], []
+        for ci, c in enumerate(chains):
+            if c.arc is None or c.arc.closed or len(c.vertices) < 2:
+                continue
+            A = c.arc.points
+            cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(A, axis=0), axis=1))])
+            v = np.asarray(c.vertices, np.int64)
+            sv = _polyline_param(P[v], A, cum)
+            rev = sv[-1] < sv[0]
+            if rev:
+                v, sv = v[::-1], sv[::-1]
+            k = np.searchsorted(sv, cum, side="right") - 1
+            ok = (k >= 0) & (k < len(v) - 1) & (cum > sv[np.clip(k, 0, len(v) - 1)]) & \
+                (cum < sv[np.clip(k + 1, 0, len(v) - 1)])
+            j = np.flatnonzero(ok)
+            if not len(j):
+                continue
+            a, b = P[v[k[j]]], P[v[k[j] + 1]]
+            ab = b - a
+            t = np.clip(np.einsum("ij,ij->i", A[j] - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0, 1)
+            d = np.linalg.norm(a + t[:, None] * ab - A[j], axis=1)
+            o = np.lexsort((-d, k[j]))
+            first = np.ones(len(o), bool)
+            first[1:] = k[j][o][1:] != k[j][o][:-1]
+            o = o[first]
+            big = d[o] > max_deviation
+            for jj in o[big]:
+                e = k[j][jj]
+                edges.append((v[e], v[e + 1]))
+                xs.append(A[j][jj])
+                where.append((ci, len(v) - 2 - e if rev else e))
+        if not edges:
+            break
+        E = np.sort(np.asarray(edges, np.int64), axis=1)
+        new_id = len(P) + np.arange(len(E))
+        P = np.vstack([P, np.asarray(xs)])
+        T, C = _split_hanging(P, T, C, E, new_id)
+        fe, fid = _split_feature_edges(fe, fid, E, new_id)
+        fixed += new_id.tolist()
+        ins = {}
+        for (ci, e), nid in zip(where, new_id.tolist()):
+            ins.setdefault(ci, []).append((e, nid))
+        for ci, lst in ins.items():
+            v = list(chains[ci].vertices)
+            for e, nid in sorted(lst, reverse=True):
+                v.insert(e + 1, nid)
+            chains[ci].vertices = np.asarray(v, np.int64)
+    return ShellMesh(P, T, C, list(mesh.component_names), np.unique(np.asarray(fixed, np.int64)), fe, fid)
 
 
 def split_member_bridges(mesh: ShellMesh, chains, locator) -> ShellMesh:

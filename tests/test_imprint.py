@@ -326,3 +326,72 @@ def test_split_member_bridges():
     assert len(m25) == 2 and all(2 in e or 5 in e for e in m25)   # the feature edge 2-5, split in two
     # nothing to split: the same mesh back
     assert split_member_bridges(out, chains, SurfaceLocator(P, T)) is out
+
+
+def test_refine_chains_bounds_the_chord_deviation(imprinted):
+    """refine_chains splits every open chain edge whose exact section bulges more than the
+    tolerance from the chord, at the farthest section point: afterwards no chain edge does, the
+    new vertices lie on the member plane and the input surface, chains stay paths of mesh edges
+    tagged as the member's feature edges, and the skin stays closed and valid with its area."""
+    import copy
+
+    from shellmesh_mdao.imprint import refine_chains
+    from shellmesh_mdao.project import SurfaceLocator
+
+    m, chains, out, res = imprinted
+    res2 = copy.deepcopy(res)
+
+    def worst(mesh, rr):
+        dev = []
+        for r in rr:
+            X = mesh.points[r.vertices]
+            A = r.arc.points
+            dev.append(np.linalg.norm(closest_on_polyline(A, X) - A, axis=1).max())
+        return np.array(dev)
+
+    before = worst(out, res)
+    tol = 0.25 * float(np.median(before[before > 0]))
+    assert (before > tol).sum() >= 4, "the fixture must have chains to refine"
+    ref = refine_chains(out, res2, tol)
+    after = worst(ref, res2)
+    assert after.max() <= tol * (1 + 1e-9), after.max()
+    assert sum(len(r.vertices) for r in res2) > sum(len(r.vertices) for r in res)
+    assert ref.check().ok and ref.is_closed()
+    assert np.isclose(ref.face_areas().sum(), out.face_areas().sum(), rtol=1e-3)
+    loc = SurfaceLocator(m.points, m.faces[:, :3])
+    new = np.arange(out.n_points, ref.n_points)
+    assert loc.closest(ref.points[new])[2].max() <= 1e-9 * m.diagonal
+    fe = {tuple(e): i for e, i in zip(ref.feature_edges.tolist(), ref.feature_edge_ids.tolist())}
+    for spec, r in zip(chains, res2):
+        assert np.abs(spec.plane.side(ref.points[r.vertices])).max() <= 1e-9 * m.diagonal
+        mid = ref.component_names.index(spec.member)
+        for a, b in zip(r.vertices[:-1].tolist(), r.vertices[1:].tolist()):
+            assert fe.get((min(a, b), max(a, b))) == mid
+    assert set(new.tolist()) <= set(ref.fixed_vertices.tolist())
+
+
+def test_chain_deviation_option_refines_the_pipeline_chains():
+    """Solver option chain_deviation (fraction of the remesh edge length; 0 = off, the default)
+    runs refine_chains in the imprint stage: more chain vertices, chords closer to the exact
+    sections; the default run is unchanged by the option's existence."""
+    from shellmesh_mdao.pipeline import REMESH_FACTOR, PipelineOptions, run_pipeline
+
+    assert PipelineOptions().chain_deviation == 0.0
+    assert PipelineOptions.from_dict({"chain_deviation": 0.01}).chain_deviation == 0.01
+    with pytest.raises(Exception, match="chain_deviation"):
+        PipelineOptions.from_dict({"chain_deviation": -1})
+    m = naca_wing(n_chord=30, n_span=25)
+    lay = naca_wing_layout()
+    size = 0.15
+    runs = [run_pipeline(m, lay, size, until="imprint", progress=False, options=o)
+            for o in (None, {"chain_deviation": 0.002})]
+
+    def worst(r):
+        return max(np.linalg.norm(closest_on_polyline(c.arc.points, r.mesh.points[c.vertices]) - c.arc.points,
+                                  axis=1).max() for c in r.chains if not c.arc.closed)
+
+    n = [sum(len(c.vertices) for c in r.chains) for r in runs]
+    assert n[1] > n[0]
+    assert worst(runs[1]) < worst(runs[0])
+    # after improve_skin and coarsen_chains (0.003 x the remesh edge of the imprinted points)
+    assert worst(runs[1]) <= (0.002 + 0.003) * REMESH_FACTOR * size
