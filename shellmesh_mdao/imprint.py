@@ -583,12 +583,19 @@ def _split_edges_between(P, T, C, verts, locator):
     if not hit.any():
         return P, T, C, (np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
     e = np.unique(np.sort(np.stack([a[hit], b[hit]], 1), axis=1), axis=0)
-    mid = 0.5 * (P[e[:, 0]] + P[e[:, 1]])
-    mid = locator.closest(mid)[0]
+    P, T, C, new_id = _split_at_surface_midpoints(P, T, C, e, locator)
+    return P, T, C, (e, new_id)
+
+
+def _split_at_surface_midpoints(P, T, C, e, locator):
+    """Split the edges ``e`` (k, 2; sorted, unique) at their midpoints moved to the closest
+    point of the input surface; every triangle on them is split (:func:`_split_hanging`).
+    Returns ``(P, T, C, new_ids)``."""
+    mid = locator.closest(0.5 * (P[e[:, 0]] + P[e[:, 1]]))[0]
     new_id = len(P) + np.arange(len(e))
     P = np.vstack([P, mid])
     T, C = _split_hanging(P, T, C, e, new_id)
-    return P, T, C, (e, new_id)
+    return P, T, C, new_id
 
 
 def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4) -> ShellMesh:
@@ -692,10 +699,7 @@ def split_member_bridges(mesh: ShellMesh, chains, locator) -> ShellMesh:
     split = cand[bridge]
     if not len(split):
         return mesh
-    mid = locator.closest(0.5 * (P[split[:, 0]] + P[split[:, 1]]))[0]
-    new_id = n + np.arange(len(split))
-    P2 = np.vstack([P, mid])
-    T2, C2 = _split_hanging(P2, T, C, split, new_id)
+    P2, T2, C2, new_id = _split_at_surface_midpoints(P, T, C, split, locator)
     fe2, fid2 = _split_feature_edges(fe, fid, split, new_id) if len(fe) else (fe, fid)
     return ShellMesh(P2, T2, C2, list(mesh.component_names), mesh.fixed_vertices, fe2, fid2)
 
