@@ -371,12 +371,12 @@ def test_refine_chains_bounds_the_chord_deviation(imprinted):
 
 
 def test_chain_deviation_option_refines_the_pipeline_chains():
-    """Solver option chain_deviation (fraction of the remesh edge length; 0 = off, the default)
+    """Solver option chain_deviation (fraction of the remesh edge length; default 0.01, 0 = off)
     runs refine_chains in the imprint stage: more chain vertices, chords closer to the exact
-    sections; the default run is unchanged by the option's existence."""
+    sections."""
     from shellmesh_mdao.pipeline import REMESH_FACTOR, PipelineOptions, run_pipeline
 
-    assert PipelineOptions().chain_deviation == 0.0
+    assert PipelineOptions().chain_deviation == 0.01
     assert PipelineOptions.from_dict({"chain_deviation": 0.01}).chain_deviation == 0.01
     with pytest.raises(Exception, match="chain_deviation"):
         PipelineOptions.from_dict({"chain_deviation": -1})
@@ -384,7 +384,7 @@ def test_chain_deviation_option_refines_the_pipeline_chains():
     lay = naca_wing_layout()
     size = 0.15
     runs = [run_pipeline(m, lay, size, until="imprint", progress=False, options=o)
-            for o in (None, {"chain_deviation": 0.002})]
+            for o in ({"chain_deviation": 0}, {"chain_deviation": 0.002})]
 
     def worst(r):
         return max(np.linalg.norm(closest_on_polyline(c.arc.points, r.mesh.points[c.vertices]) - c.arc.points,
