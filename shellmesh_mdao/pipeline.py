@@ -51,6 +51,10 @@ class PipelineOptions:
                           triangulation as it is; for tests).
     ``remesh_deviation``  chordal deviation allowed between the remeshed skin and the input, as a
                           fraction of the remesh edge length (edges shrink where curvature needs it).
+    ``snap``              the imprint moves a skin vertex onto a member plane when it lies within
+                          this fraction of its shortest incident edge of it (instead of cutting a
+                          sliver beside it); below 0.5. 0.4 (0.25 before 2026-11-22: swept_wing
+                          skin mean scaled Jacobian 0.9507 against 0.9451, see docs/benchmarks.md).
     ``chain_deviation``   above 0: after the cut, member chain edges whose exact section bulges more
                           than this fraction of the remesh edge length from the chord are split
                           (:func:`~shellmesh_mdao.imprint.refine_chains`; 0.01 takes the worst corpus
@@ -72,10 +76,15 @@ class PipelineOptions:
                           :func:`~shellmesh_mdao.smooth.smooth` and docs/optimisation.md.
     ``smooth_jacobian``   no smoothing step before subdivision may bring an element to or below
                           this scaled Jacobian (nor lower one already below it).
+    ``final_ortho_weight`` weight of the quad-corner orthogonality term in the smoothing after
+                          subdivision (``ortho_weight`` of :func:`~shellmesh_mdao.smooth.smooth`;
+                          the pass before subdivision keeps smooth()'s default 1). 3 lifts the
+                          worst and the mean scaled Jacobian (docs/benchmarks.md); 0 drops the term.
     """
 
     remesh: bool = True
     remesh_deviation: float = 0.1
+    snap: float = 0.4
     chain_deviation: float = 0.01
     split_time_limit: float = 60.0
     merge_time_limit: float = 60.0
@@ -86,6 +95,7 @@ class PipelineOptions:
     guard_jacobian: float = 0.2
     smooth_jacobian: float = 0.4
     smooth_energy: str = "squared"
+    final_ortho_weight: float = 3.0
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "PipelineOptions":
@@ -107,6 +117,9 @@ class PipelineOptions:
                 raise ShellMeshError(f"solver option {k!r} must be a {typ.__name__}, got {v!r}") from None
             if typ in (int, float) and not (np.isfinite(out[k]) and out[k] >= 0):
                 raise ShellMeshError(f"solver option {k!r} must be a finite non-negative number, got {v!r}")
+        if not out.get("snap", 0.0) < 0.5:
+            raise ShellMeshError(f"solver option 'snap' must be below 0.5 (a fraction of a vertex's shortest "
+                                 f"incident edge), got {out['snap']!r}")
         if out.get("smooth_energy", "length") not in ("length", "squared"):
             raise ShellMeshError(f"solver option 'smooth_energy' must be 'length' or 'squared', got "
                                  f"{out['smooth_energy']!r}")
@@ -269,7 +282,7 @@ def stage_imprint(state: PipelineState) -> PipelineState:
 
     _need(state, "imprint")
     P, T = state.surface.points, state.surface.faces[:, :3]
-    mesh, chains = imprint_chains(state.mesh, P, T, state.specs, locator=state.locator)
+    mesh, chains = imprint_chains(state.mesh, P, T, state.specs, snap=state.options.snap, locator=state.locator)
     if state.options.chain_deviation > 0:
         mesh = refine_chains(mesh, chains, state.options.chain_deviation * REMESH_FACTOR * state.size)
     mesh = improve_skin(mesh, state.locator, chains)
@@ -366,7 +379,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
     o = state.options
     q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
     if o.final_iterations:
-        q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size)
+        q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size,
+                        ortho_weight=o.final_ortho_weight)
     sj = scaled_jacobian(q.points, q.faces)
     poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     repair = None
