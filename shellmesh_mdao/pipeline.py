@@ -53,8 +53,10 @@ class PipelineOptions:
                           fraction of the remesh edge length (edges shrink where curvature needs it).
     ``snap``              the imprint moves a skin vertex onto a member plane when it lies within
                           this fraction of its shortest incident edge of it (instead of cutting a
-                          sliver beside it); below 0.5. 0.4 (0.25 before 2026-11-22: swept_wing
-                          skin mean scaled Jacobian 0.9507 against 0.9451, see docs/benchmarks.md).
+                          sliver beside it); below 0.5, default 0.25. 0.4 leaves fewer triangles
+                          beside the chains (swept_wing skin mean scaled Jacobian 0.9507 against
+                          0.9468) but 6 of the 192 stress-sweep layouts are then refused
+                          (docs/benchmarks.md).
     ``chain_deviation``   above 0: after the cut, member chain edges whose exact section bulges more
                           than this fraction of the remesh edge length from the chord are split
                           (:func:`~shellmesh_mdao.imprint.refine_chains`; 0.01 takes the worst corpus
@@ -84,7 +86,7 @@ class PipelineOptions:
 
     remesh: bool = True
     remesh_deviation: float = 0.1
-    snap: float = 0.4
+    snap: float = 0.25
     chain_deviation: float = 0.01
     split_time_limit: float = 60.0
     merge_time_limit: float = 60.0
