@@ -615,7 +615,7 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
     fid = np.asarray(mesh.feature_edge_ids).copy()
     fixed = list(np.asarray(mesh.fixed_vertices, np.int64))
     for _ in range(rounds):
-        edges, xs, where = [], [], []
+        edges, xs, w_chain, w_pos = [], [], [], []
         for ci, c in enumerate(chains):
             if c.arc is None or c.arc.closed or len(c.vertices) < 2:
                 continue
@@ -640,28 +640,26 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
             first = np.ones(len(o), bool)
             first[1:] = k[j][o][1:] != k[j][o][:-1]
             o = o[first]
-            big = d[o] > max_deviation
-            for jj in o[big]:
-                e = k[j][jj]
-                edges.append((v[e], v[e + 1]))
-                xs.append(A[j][jj])
-                where.append((ci, len(v) - 2 - e if rev else e))
+            sel = o[d[o] > max_deviation]
+            if not len(sel):
+                continue
+            e = k[j][sel]                      # chain edge (in the ordered chain) to split
+            edges.append(np.stack([v[e], v[e + 1]], 1))
+            xs.append(A[j][sel])
+            w_chain.append(np.full(len(e), ci))
+            w_pos.append(len(v) - 2 - e if rev else e)
         if not edges:
             break
-        E = np.sort(np.asarray(edges, np.int64), axis=1)
+        E = np.sort(np.vstack(edges), axis=1)
         new_id = len(P) + np.arange(len(E))
-        P = np.vstack([P, np.asarray(xs)])
+        P = np.vstack([P, *xs])
         T, C = _split_hanging(P, T, C, E, new_id)
         fe, fid = _split_feature_edges(fe, fid, E, new_id)
         fixed += new_id.tolist()
-        ins = {}
-        for (ci, e), nid in zip(where, new_id.tolist()):
-            ins.setdefault(ci, []).append((e, nid))
-        for ci, lst in ins.items():
-            v = list(chains[ci].vertices)
-            for e, nid in sorted(lst, reverse=True):
-                v.insert(e + 1, nid)
-            chains[ci].vertices = np.asarray(v, np.int64)
+        w_chain, w_pos = np.concatenate(w_chain), np.concatenate(w_pos)
+        for ci in np.unique(w_chain):           # new vertex after position e of its chain
+            m = w_chain == ci
+            chains[ci].vertices = np.insert(np.asarray(chains[ci].vertices, np.int64), w_pos[m] + 1, new_id[m])
     return ShellMesh(P, T, C, list(mesh.component_names), np.unique(np.asarray(fixed, np.int64)), fe, fid)
 
 
