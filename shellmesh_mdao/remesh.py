@@ -973,6 +973,7 @@ class _Ctx:
 
 # ============================================================================ operations
 _COS_FACING = np.cos(np.radians(80.0))
+_COS_TURNED = np.cos(np.radians(100.0))
 
 
 def _facing_ok(W, ctx, Fn, nrm):
@@ -1111,6 +1112,14 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
             new1 = _tri_min_angle(P[va], newP, P[vc])
             new2 = _tri_min_angle(newP, P[vb], P[vc])
             ok &= ~valid | gross | (np.minimum(new1, new2) >= np.minimum(min_angle_guard, 0.5 * old))
+            # and none of them may turn over: a normal more than 100 degrees from the input
+            # normal at the new point (a split across a nose much tighter than the edge, whose
+            # projected midpoint lands beside the two faces instead of between them)
+            if rm.any():
+                tn = ctx.tri_n[np.maximum(newtri, 0)]
+                for t3 in ((P[va], newP, P[vc]), (newP, P[vb], P[vc])):
+                    nn = _unit(np.cross(t3[1] - t3[0], t3[2] - t3[0]))
+                    ok &= ~valid | fm | (newtri < 0) | (np.einsum("ij,ij->i", nn, tn) > _COS_TURNED)
     if not ok.all():
         sel, f0, f1, a, b = sel[ok], f0[ok], f1[ok], a[ok], b[ok]
         newP, newkind, newS, newch, newtri = newP[ok], newkind[ok], newS[ok], newch[ok], newtri[ok]
