@@ -12,7 +12,9 @@ on the input surface) is then cut by the same plane inside the same bounds:
    spar's) are inserted first, as single vertices both chains will share;
 2. skin vertices within ``snap`` times the local edge length of the plane are snapped
    onto the curve (no sliver triangles), the remaining crossed edges are split at the
-   plane and the crossed triangles re-triangulated (best diagonal);
+   plane and the crossed triangles re-triangulated (best diagonal); a cut that misses one
+   of its crossing vertices (a larger snap can reach a vertex across a thin section beside
+   a crossing) is redone at ``SNAP_FALLBACK``;
 3. every new or snapped chain vertex is moved to its closest point on the exact input
    curve, so it lies on the input surface AND on the member plane;
 4. the chain edges become ``feature_edges`` tagged with the member's component id, their
@@ -57,6 +59,7 @@ class ChainResult:
     side: str
     vertices: np.ndarray          # ordered chain vertex indices in the skin mesh
     arc: SectionArc = field(repr=False, default=None)
+    snap: float = 0.25            # snap distance its cut used (the fallback when the asked one failed)
 
     @property
     def n_vertices(self) -> int:
@@ -467,10 +470,19 @@ def _split_hanging(P, T, C, uedges, new_id):
     return np.vstack(out_t), np.concatenate(out_c)
 
 
+SNAP_FALLBACK = 0.25
+
+
 def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np.ndarray, chains,
-                   snap: float = 0.25, tol: float = 1e-9, locator=None):
+                   snap: float = 0.25, tol: float = 1e-9, locator=None, snap_fallback: float = SNAP_FALLBACK):
     """Imprint every chain of ``chains`` (list of :class:`ChainSpec`) into the triangle
     ``skin`` (vertices on the input surface given by ``surface_points``/``surface_tris``).
+
+    ``snap``: snap distance of the cut (:func:`cut_chain`). A cut at a snap distance above
+    ``snap_fallback`` that does not keep the chain's crossing points (an open chain not
+    ending at its two crossing vertices, a crossing vertex on its arc left out of it, or a
+    branching chain) is redone at ``snap_fallback``: a larger snap can reach skin vertices
+    beside a crossing point, across a thin section. ``ChainResult.snap`` tells which was used.
 
     Returns ``(mesh, results)``: the imprinted skin (feature edges of each chain tagged with
     the member's component id, chain vertices fixed) and one :class:`ChainResult` per chain.
@@ -544,16 +556,31 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     for ci, (spec, arc) in enumerate(zip(chains, arcs)):
         member_id = names.index(spec.member) if spec.member in names else (names.append(spec.member) or len(names) - 1)
         on = np.zeros(len(P), bool)
+        must = np.zeros(0, np.int64)
         if len(cross_ids):
             xs = cross_ids[np.abs(spec.plane.side(P[cross_ids])) <= eps]
             on[xs] = True
+            # crossing vertices lying on this chain's own arc: the chain must pass through them
+            if len(xs):
+                dx = np.linalg.norm(closest_on_polyline(P[xs], arc.points, arc.closed) - P[xs], axis=1)
+                must = xs[dx <= 1e3 * eps]
         movable = ~(fixed | feat_v)
         endv = None
         if not arc.closed:
             d_end, i_end = cKDTree(Xu).query(arc.points[[0, -1]])
             endv = cross_ids[i_end]
-        P, T, C, chain_v, (split_e, new_n) = cut_chain(P, T, C, spec, arc, movable, on, snap=snap,
-                                                       end_vertices=endv)
+        used = snap
+        try:
+            cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap, end_vertices=endv)
+            clean = _keeps_crossings(cut[3], must, endv)
+        except ImprintError:
+            if snap <= snap_fallback:
+                raise
+            clean = False
+        if not clean and snap > snap_fallback:
+            cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap_fallback, end_vertices=endv)
+            used = snap_fallback
+        P, T, C, chain_v, (split_e, new_n) = cut
         grow = len(P) - len(fixed)
         fixed = np.concatenate([fixed, np.zeros(grow, bool)])
         feat_v = np.concatenate([feat_v, np.zeros(grow, bool)])
@@ -567,9 +594,19 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
         fid.append(np.full(len(ce), member_id, np.int32))
         fixed[chain_v] = True
         feat_v[chain_v] = True
-        results.append(ChainResult(spec.member, spec.side, chain_v, arc))
+        results.append(ChainResult(spec.member, spec.side, chain_v, arc, used))
     mesh = ShellMesh(P, T, C, names, np.flatnonzero(fixed), np.vstack(fe), np.concatenate(fid))
     return mesh, results
+
+
+def _keeps_crossings(chain_v, must, end_vertices) -> bool:
+    """True when the chain ``chain_v`` passes through every vertex of ``must`` and, when
+    open (``end_vertices`` given), ends at those two vertices."""
+    if len(must) and not np.isin(must, chain_v).all():
+        return False
+    if end_vertices is not None and chain_v[0] != chain_v[-1]:
+        return {int(chain_v[0]), int(chain_v[-1])} == {int(v) for v in end_vertices}
+    return True
 
 
 def _split_edges_between(P, T, C, verts, locator):
@@ -1248,7 +1285,9 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
        packed closer than the element size, a chain ending or crossing a crease a fraction of
        an element from the crease's next vertex, oblique members crossing): per bad triangle
        the best of edge collapse (a free vertex into a neighbour; a chain or crease vertex
-       along its line), edge split (on the input surface, on the exact arc, on the input's
+       along its line; a chain collapse never makes a chain edge longer than 1.3 x the chain's
+       longest edge when the repair started, nor than 1.5 x the longer of the two edges it
+       joins, so repeated repairs cannot open a gap in a chain), edge split (on the input surface, on the exact arc, on the input's
        sharp edge) and vertex relocation (on the surface, along the arc, along the sharp
        edge), each followed by local flips, is kept when it improves the angles around it.
        Crossings, chain ends, chain/crease crossings and corners never move; every feature
@@ -1687,6 +1726,10 @@ class _SkinPatch:
         self.fkeys, self.fids = keys[o], np.asarray(fid)[o]
         self.fover = {}
         self.chains = list(chains)
+        # a chain vertex collapse may not make a chain edge longer than 1.3 x the chain's
+        # longest edge as imprinted (nor than 1.5 x the longer of the two edges it joins)
+        self.chain_lmax = [1.3 * float(np.linalg.norm(np.diff(P[c], axis=0), axis=1).max()) if len(c) > 1
+                           else np.inf for c in self.chains]
         self.arcs = arcs
         self.chain_member = chain_member
         self.locator = locator
@@ -1943,6 +1986,12 @@ class _SkinPatch:
                 moved.append((w, i))
         if k != _FREE and len(moved) != 1:
             return False
+        if k == _CHAIN:
+            w = moved[0][0]
+            lw = float(np.linalg.norm(self.P[u] - self.P[w]))
+            if lw > self.chain_lmax[int(self.chain_of[v])] or lw > 1.5 * max(
+                    float(np.linalg.norm(self.P[u] - self.P[v])), float(np.linalg.norm(self.P[v] - self.P[w]))):
+                return False
         fv = self.faces(v)
         keep = fv[(fv != fa) & (fv != fb)]
         new = self.T[keep].copy()

@@ -53,10 +53,11 @@ class PipelineOptions:
                           fraction of the remesh edge length (edges shrink where curvature needs it).
     ``snap``              the imprint moves a skin vertex onto a member plane when it lies within
                           this fraction of its shortest incident edge of it (instead of cutting a
-                          sliver beside it); below 0.5, default 0.25. 0.4 leaves fewer triangles
-                          beside the chains (swept_wing skin mean scaled Jacobian 0.9507 against
-                          0.9468) but 6 of the 192 stress-sweep layouts are then refused
-                          (docs/benchmarks.md).
+                          sliver beside it); below 0.5, default 0.4 (fewer triangles beside the
+                          chains than at 0.25: swept_wing skin mean scaled Jacobian 0.9507 against
+                          0.9468). A chain whose cut misses one of its crossing vertices at a
+                          distance above 0.25 is cut again at 0.25 (``imprint.SNAP_FALLBACK``; the
+                          report's per-chain ``snap`` says which was used).
     ``chain_deviation``   above 0: after the cut, member chain edges whose exact section bulges more
                           than this fraction of the remesh edge length from the chord are split
                           (:func:`~shellmesh_mdao.imprint.refine_chains`; 0.01 takes the worst corpus
@@ -86,7 +87,7 @@ class PipelineOptions:
 
     remesh: bool = True
     remesh_deviation: float = 0.1
-    snap: float = 0.25
+    snap: float = 0.4
     chain_deviation: float = 0.01
     split_time_limit: float = 60.0
     merge_time_limit: float = 60.0
@@ -295,7 +296,7 @@ def stage_imprint(state: PipelineState) -> PipelineState:
     members: dict = {}
     for c in chains:
         e = members.setdefault(c.member, {"chains": []})
-        e["chains"].append({"side": c.side, "n_vertices": int(c.n_vertices),
+        e["chains"].append({"side": c.side, "n_vertices": int(c.n_vertices), "snap": float(c.snap),
                             "length": float(np.linalg.norm(np.diff(mesh.points[c.vertices], axis=0), axis=1).sum())})
     st.report["members"] = members
     return st

@@ -19,7 +19,8 @@ local repair on its own (a member crossing a crease right next to a crease verte
 import numpy as np
 import pytest
 
-from shellmesh_mdao.imprint import ChainSpec, _tri_angles_min, improve_skin, imprint_chains
+from shellmesh_mdao.imprint import (SNAP_FALLBACK, ChainSpec, _tri_angles_min, closest_on_polyline, improve_skin,
+                                   imprint_chains)
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.pipeline import run_pipeline
@@ -78,6 +79,57 @@ def test_chains_exact_and_shared(geometry_dir, manifest, name, spars):
             for j in range(nsp):
                 ends = {int(np.intersect1d(spar[j], rib[k])[0]) for k in (0, 9)}
                 assert set(spar[j][[0, -1]].tolist()) == ends, (w.name, side, j)
+
+
+def junction_misses(mesh, chains, tol):
+    """Where a chain's exact arc ends ON another chain's arc (a rib ending on a spar, a spar on
+    its root or tip rib), both chains must have a vertex at that point, and an open chain must
+    end there. Returns the (member, side, point) found missing."""
+    P = mesh.points
+    miss = []
+    ends = [(c, x) for c in chains if not c.arc.closed for x in c.arc.points[[0, -1]]]
+    for c, x in ends:
+        if np.linalg.norm(P[c.vertices[[0, -1]]] - x, axis=1).min() > tol:
+            miss.append((c.member, c.side, x.round(6).tolist()))
+        for o in chains:
+            if o is c or np.linalg.norm(closest_on_polyline(x[None], o.arc.points, o.arc.closed)[0] - x) > tol:
+                continue
+            if np.linalg.norm(P[o.vertices] - x, axis=1).min() > tol:
+                miss.append((o.member, o.side, x.round(6).tolist()))
+    return miss
+
+
+def test_imprint_redoes_a_cut_that_misses_its_crossing(geometry_dir, manifest):
+    """swept_wing layout of stress seed 139 (ribs at 0.1/0.18/0.62/0.72/0.94, spars at 0.12 and 0.36 of
+    the chord, size 0.0312), with the solver option ``snap`` at 0.4. At that snap distance the cut of
+    left_wing/spar_1's lower chain snaps a vertex beside its end crossing (the wing is thin there) and
+    ends one vertex off it; the imprint finds the crossing missing and redoes that one cut at
+    ``SNAP_FALLBACK`` (0.25). Without the fallback the members stage refused the layout ("meet on one
+    skin side only")."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "run_scripts"))
+    import stress_layouts as SL
+    case = SL.draw_case(139, "swept_wing", manifest=manifest, geometry_dir=geometry_dir)
+    lay = layout_from_manifest(manifest, "swept_wing", ribs=list(case["ribs"]), spars=list(case["spars"]))
+    opts = {"snap": 0.4}
+    st = run_pipeline(geometry_dir / manifest["geometries"]["swept_wing"]["file"], lay, case["size"],
+                      until="remesh", progress=False, options=opts).state
+    P, T = st.surface.points, st.surface.faces[:, :3]
+    tol = 1e-9 * st.surface.diagonal
+    # the fallback switched off: the chain misses its crossing
+    mesh, chains = imprint_chains(st.mesh, P, T, st.specs, snap=0.4, snap_fallback=0.4, locator=st.locator)
+    assert ("left_wing/spar_1", "lower") in {m[:2] for m in junction_misses(mesh, chains, tol)}
+    # as the pipeline runs it: that one chain is cut again at 0.25, every junction is shared
+    mesh, chains = imprint_chains(st.mesh, P, T, st.specs, snap=0.4, locator=st.locator)
+    assert junction_misses(mesh, chains, tol) == []
+    assert [(c.member, c.side) for c in chains if c.snap != 0.4] == [("left_wing/spar_1", "lower")]
+    assert all(c.snap in (0.4, SNAP_FALLBACK) for c in chains)
+    # and the whole run meshes it: members conform at every junction (the members stage checks)
+    r = run_pipeline(geometry_dir / manifest["geometries"]["swept_wing"]["file"], lay, case["size"],
+                     until="members", progress=False, options=opts)
+    snaps = {c["side"]: c["snap"] for c in r.report["members"]["left_wing/spar_1"]["chains"]}
+    assert snaps == {"upper": 0.4, "lower": SNAP_FALLBACK}
 
 
 @slow

@@ -159,15 +159,15 @@ def _chain_side_edges(res):
 
 
 def test_snap_option_keeps_the_edges_beside_chains_long():
-    """Solver option snap (default 0.25): the imprint moves a vertex onto a member plane when it lies
+    """Solver option snap (default 0.4): the imprint moves a vertex onto a member plane when it lies
     within snap x its shortest incident edge of it, so a larger snap cuts fewer short edges beside the
-    chains (on this wing at 0.4: 5th percentile 0.55 against 0.52 of the remesh edge, 683 against
-    719 nodes); values of 0.5 and more are refused."""
-    assert pl.PipelineOptions().snap == 0.25
+    chains (on this wing at 0.4 against 0.25: 5th percentile 0.55 against 0.52 of the remesh edge, 683
+    against 719 nodes); values of 0.5 and more are refused."""
+    assert pl.PipelineOptions().snap == 0.4
     with pytest.raises(ShellMeshError, match="'snap' must be below 0.5"):
         pl.PipelineOptions.from_dict({"snap": 0.5})
     runs = [pl.run_pipeline(small_wing(), small_layout(), SIZE, until="imprint", progress=False, options=o)
-            for o in (None, {"snap": 0.4})]
+            for o in ({"snap": 0.25}, None)]
     lo, hi = (np.percentile(_chain_side_edges(r), 5) / (pl.REMESH_FACTOR * SIZE) for r in runs)
     assert hi > lo and hi >= 0.5
     assert runs[1].mesh.n_points < runs[0].mesh.n_points
