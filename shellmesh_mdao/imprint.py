@@ -478,7 +478,8 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     """Imprint every chain of ``chains`` (list of :class:`ChainSpec`) into the triangle
     ``skin`` (vertices on the input surface given by ``surface_points``/``surface_tris``).
 
-    ``snap``: snap distance of the cut (:func:`cut_chain`). A cut at a snap distance above
+    ``snap``: snap distance of the cut (:func:`cut_chain`; the pipeline passes its solver option
+    ``snap``, 0.4 by default). A cut at a snap distance above
     ``snap_fallback`` that does not keep the chain's crossing points (an open chain not
     ending at its two crossing vertices, a crossing vertex on its arc left out of it, or a
     branching chain) is redone at ``snap_fallback``: a larger snap can reach skin vertices
@@ -1287,13 +1288,14 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
        the best of edge collapse (a free vertex into a neighbour; a chain or crease vertex
        along its line; a chain collapse never makes a chain edge longer than 1.3 x the chain's
        longest edge when the repair started, nor than 1.5 x the longer of the two edges it
-       joins, so repeated repairs cannot open a gap in a chain), edge split (on the input surface, on the exact arc, on the input's
-       sharp edge) and vertex relocation (on the surface, along the arc, along the sharp
-       edge), each followed by local flips, is kept when it improves the angles around it.
-       Crossings, chain ends, chain/crease crossings and corners never move; every feature
-       line is kept. At most ``max_repairs`` triangles are attempted, worst first (default
-       ``32 + n_faces // 4000``): the repair is for the few spots imprinting leaves on a
-       remeshed skin, not for remeshing a raw triangulation (``remesh=False``).
+       joins, so repeated repairs cannot open a gap in a chain), edge split (on the input
+       surface, on the exact arc, on the input's sharp edge) and vertex relocation (on the
+       surface, along the arc, along the sharp edge), each followed by local flips, is kept
+       when it improves the angles around it. Crossings, chain ends, chain/crease crossings
+       and corners never move; every feature line is kept. At most ``max_repairs`` triangles
+       are attempted, worst first (default ``32 + n_faces // 4000``): the repair is for the
+       few spots imprinting leaves on a remeshed skin, not for remeshing a raw triangulation
+       (``remesh=False``).
 
     Every vertex stays on the input surface, chain vertices on their arc (so on their member
     plane), crease vertices on the input's sharp edges; no face is turned over. When vertices
