@@ -1,10 +1,13 @@
 # The two set-up commands of the README. Each installs what it needs, then runs.
 #   make demo   - install the package and run the main job on the bundled default wing (mesh, pictures,
 #                 report; then the CalculiX wing-box analysis through OpenMDAO)
-#   make test   - install the package with its test extras and run the test suite
+#   make test   - install the package with its test extras and run the test suite (2 processes;
+#                 PYTEST_WORKERS=0 for one)
 PYTHON ?= python3
 DEMO_DIR ?= demo_out
 PYTEST_ARGS ?=
+# test processes (pytest-xdist): 2, one per core of the reference machine; 0 runs the tests in this process
+PYTEST_WORKERS ?= 2
 
 .PHONY: install install-test install-system demo test test-fast
 
@@ -28,7 +31,7 @@ demo: install
 	$(PYTHON) run_scripts/wingbox_analysis.py --out-dir $(DEMO_DIR)/wingbox_analysis
 
 test: install-test
-	$(PYTHON) -m pytest $(PYTEST_ARGS)
+	$(PYTHON) -m pytest -n $(PYTEST_WORKERS) $(PYTEST_ARGS)
 
 test-fast: install-test
-	$(PYTHON) -m pytest -m "not slow" $(PYTEST_ARGS)
+	$(PYTHON) -m pytest -n $(PYTEST_WORKERS) -m "not slow" $(PYTEST_ARGS)

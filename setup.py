@@ -33,7 +33,8 @@ setup(
         "pillow>=9.0",
     ],
     extras_require={
-        "test": ["pytest>=7", "hypothesis>=6", "pytest-timeout>=2.1", "gmsh>=4.11", "mpi4py>=3.1"],
+        "test": ["pytest>=7", "pytest-xdist>=3", "hypothesis>=6", "pytest-timeout>=2.1", "gmsh>=4.11",
+                 "mpi4py>=3.1"],
         "mpi": ["mpi4py>=3.1"],
         "cad": ["gmsh>=4.11"],
     },
