@@ -53,13 +53,17 @@ class ChainSpec:
     ends: tuple = ()   # crossing points (3,) that must be vertices of this chain
 
 
+#: snap distance a cut is redone at when a larger one misses a crossing (:func:`imprint_chains`)
+SNAP_FALLBACK = 0.25
+
+
 @dataclass
 class ChainResult:
     member: str
     side: str
     vertices: np.ndarray          # ordered chain vertex indices in the skin mesh
     arc: SectionArc = field(repr=False, default=None)
-    snap: float = 0.25            # snap distance its cut used (the fallback when the asked one failed)
+    snap: float = SNAP_FALLBACK   # snap distance its cut used (the fallback when the asked one failed)
 
     @property
     def n_vertices(self) -> int:
@@ -468,9 +472,6 @@ def _split_hanging(P, T, C, uedges, new_id):
                   np.stack([m2, m1, f[:, 2]], 1), np.stack([m0, m1, m2], 1)]
         out_c += [C[r]] * 4
     return np.vstack(out_t), np.concatenate(out_c)
-
-
-SNAP_FALLBACK = 0.25
 
 
 def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np.ndarray, chains,

@@ -1118,8 +1118,8 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
             if rm.any():
                 tn = ctx.tri_n[np.maximum(newtri, 0)]
                 for t3 in ((P[va], newP, P[vc]), (newP, P[vb], P[vc])):
-                    nn = _unit(np.cross(t3[1] - t3[0], t3[2] - t3[0]))
-                    ok &= ~valid | fm | (newtri < 0) | (np.einsum("ij,ij->i", nn, tn) > _COS_TURNED)
+                    nn = _unit(cross_rows(t3[1] - t3[0], t3[2] - t3[0]))
+                    ok &= ~valid | fm | (newtri < 0) | (_dot(nn, tn) > _COS_TURNED)
     if not ok.all():
         sel, f0, f1, a, b = sel[ok], f0[ok], f1[ok], a[ok], b[ok]
         newP, newkind, newS, newch, newtri = newP[ok], newkind[ok], newS[ok], newch[ok], newtri[ok]
