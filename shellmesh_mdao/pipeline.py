@@ -24,7 +24,7 @@ import numpy as np
 
 from .errors import SizeError, ShellMeshError
 from .mesh import ShellMesh
-from .quality import scaled_jacobian
+from .quality import element_quality, scaled_jacobian
 
 log = logging.getLogger("shellmesh_mdao")
 
@@ -83,6 +83,16 @@ class PipelineOptions:
                           subdivision (``ortho_weight`` of :func:`~shellmesh_mdao.smooth.smooth`;
                           the pass before subdivision keeps smooth()'s default 1). 3 lifts the
                           worst and the mean scaled Jacobian (docs/benchmarks.md); 0 drops the term.
+    ``smooth_warp_weight`` weight of the quad planarity term in the smoothing before subdivision
+                          (``warp_weight`` of :func:`~shellmesh_mdao.smooth.smooth`): the corners of
+                          quads warped more than ``warp_from`` degrees slide along the input facets
+                          until the quad is flatter. Default 300; 0 drops the term.
+    ``final_warp_weight`` the same after subdivision, applied only while more than 1 % of the quads
+                          are warped more than ``warp_goal`` degrees when the final smoothing starts
+                          (the warp p99 acceptance; ``warp_goal`` 0: always). Default 300.
+    ``warp_from``         warp (degrees) above which a quad is in the planarity term; default 7.
+    ``warp_goal``         warp p99 (degrees) the final smoothing's planarity term works towards;
+                          default 10 (:data:`~shellmesh_mdao.quality.ACCEPTANCE`).
     """
 
     remesh: bool = True
@@ -99,6 +109,10 @@ class PipelineOptions:
     smooth_jacobian: float = 0.4
     smooth_energy: str = "squared"
     final_ortho_weight: float = 3.0
+    smooth_warp_weight: float = 300.0
+    final_warp_weight: float = 300.0
+    warp_from: float = 7.0
+    warp_goal: float = 10.0
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "PipelineOptions":
@@ -363,7 +377,8 @@ def stage_smooth(state: PipelineState) -> PipelineState:
     # element above smooth_jacobian (0.4: triangle angles >= ~20 deg, children above ~0.3)
     mesh, res = smooth(state.mesh, state.supports, iterations=state.options.smooth_iterations,
                        min_jacobian=state.options.smooth_jacobian, energy=state.options.smooth_energy,
-                       target_edge=REMESH_FACTOR * state.size)
+                       target_edge=REMESH_FACTOR * state.size, warp_weight=state.options.smooth_warp_weight,
+                       warp_from=state.options.warp_from)
     st = state.but(mesh=mesh, stage="smooth")
     st.report["smooth"] = _smooth_report(res)
     return st
@@ -381,9 +396,22 @@ def stage_quad(state: PipelineState) -> PipelineState:
     _need(state, "quad")
     o = state.options
     q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
+    warp_term = None
     if o.final_iterations:
         q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size,
                         ortho_weight=o.final_ortho_weight)
+        # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
+        # where the warp p99 acceptance is missed
+        wq = element_quality(q.points, q.faces[~q.is_tri])["warp"] if q.n_quads else np.zeros(0)
+        p99 = float(np.percentile(wq, 99)) if len(wq) else 0.0
+        warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
+        if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal):
+            q, res2 = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy,
+                             target_edge=state.size, ortho_weight=o.final_ortho_weight,
+                             warp_weight=o.final_warp_weight, warp_from=o.warp_from)
+            res = dataclasses.replace(res2, seconds=res.seconds + res2.seconds, quality_before=res.quality_before)
+            wq = element_quality(q.points, q.faces[~q.is_tri])["warp"]
+            warp_term.update(applied=True, warp_p99_after=float(np.percentile(wq, 99)))
     sj = scaled_jacobian(q.points, q.faces)
     poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     repair = None
@@ -403,6 +431,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     st = state.but(mesh=q, supports=sup, stage="quad")
     if o.final_iterations:
         st.report["final_smooth"] = _smooth_report(res)
+        st.report["final_smooth"]["warp_term"] = warp_term
     if repair is not None:
         st.report["poor_repair"] = repair
     st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),

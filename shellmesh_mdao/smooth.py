@@ -902,9 +902,84 @@ class _Ortho:
         return (J.T @ J).tocsr()
 
 
+class _Warp:
+    """Planarity term of the quads (beyond the paper). For every quad (a, b, c, d) whose warp
+    is above ``warp_from`` degrees the residual
+
+        r = n . (a - b + c - d) / l
+
+    (n the quad's unit normal, l the mean of its two diagonals; both frozen when the term is
+    built) is the quad's twist over its size: zero for any planar quad, and about the warp
+    angle in radians. Weight ``scale * l`` (the units of the edge-length term).
+
+    A vertex moves along its support and is projected back onto it, so a move ``u`` in its
+    tangent plane ends as ``(I - f f^T) u`` with ``f`` the normal of the support under the
+    vertex (the input facet, the member plane; zero on a curve). The residual therefore sees
+    the move through ``m = n - (n . f) f``, not through the mesh's own vertex normal, which
+    is about ``n`` and would hide the leverage: over a kink of the input the facets on the two
+    sides tilt against the quad, and sliding the corners along them flattens it."""
+
+    SIGMA = np.array([1.0, -1.0, 1.0, -1.0])
+
+    def __init__(self, P, faces, is_quad, scale, support_normals, warp_from):
+        """``support_normals(verts)``: (k, 3) normal of the support under each vertex."""
+        from .quality import element_quality
+        Q = faces[is_quad]
+        C = P[Q]
+        self.n = _unit(cross_rows(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
+        ld = 0.5 * (_norm(C[:, 2] - C[:, 0]) + _norm(C[:, 3] - C[:, 1])) if len(Q) else np.zeros(0)
+        sel = (ld > 0) & (element_quality(P, Q)["warp"] > warp_from) if len(Q) else np.zeros(0, bool)
+        self.q, self.n, ld = Q[sel], self.n[sel], ld[sel]
+        self.s = 1.0 / ld
+        self.w = scale * ld
+        verts, inv = np.unique(self.q, return_inverse=True)
+        fq = support_normals(verts)[inv.reshape(self.q.shape)]          # (m, 4, 3)
+        self.m = self.n[:, None, :] - np.einsum("mj,mkj->mk", self.n, fq)[:, :, None] * fq
+
+    def __len__(self):
+        return len(self.q)
+
+    def gradient(self, x, n):
+        """(n, 3) gradient of 1/2 sum w r^2 at positions x, through the moves' ``m``."""
+        r = self.s * _dot(self.n, (x[self.q] * self.SIGMA[None, :, None]).sum(1))
+        c = (self.w * r * self.s)[:, None, None] * self.m
+        g = np.zeros((n, 3))
+        for k in range(4):
+            for d in range(3):
+                g[:, d] += np.bincount(self.q[:, k], weights=self.SIGMA[k] * c[:, k, d], minlength=n)
+        return g
+
+    def block_trace(self, n):
+        """Mean diagonal of each vertex's 3x3 block of the Hessian (upper bound)."""
+        t = np.zeros(n)
+        for k in range(4):
+            t += np.bincount(self.q[:, k], weights=self.w * self.s ** 2 / 3.0, minlength=n)
+        return t
+
+    def hessian(self, col_start, ncol, tv, k):
+        """Hessian J_T^T W J_T in the reduced coordinates (see :meth:`_Ortho.hessian`)."""
+        m = len(self.q)
+        rows, cols, vals = [], [], []
+        sw = np.sqrt(self.w) * self.s
+        for kk in range(4):
+            v = self.q[:, kk]
+            for jc in range(3):
+                sel = np.flatnonzero(ncol[v] > jc)
+                if not len(sel):
+                    continue
+                col = col_start[v[sel]] + jc
+                rows.append(sel)
+                cols.append(col)
+                vals.append(self.SIGMA[kk] * sw[sel] * _dot(self.m[sel, kk], tv[col]))
+        if not rows:
+            return sparse.csr_matrix((k, k))
+        J = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, k))
+        return (J.T @ J).tocsr()
+
+
 def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy: str = "length",
            target_edge: float | None = None, diagonal_weight: float = 0.0, ortho_weight: float = 1.0,
-           trust: float = 0.3, reg: float = 0.25, curvature_weight: float = 10.0, refresh: int = 4,
+           warp_weight: float = 0.0, warp_from: float = 7.0, trust: float = 0.3, reg: float = 0.25, curvature_weight: float = 10.0, refresh: int = 4,
            min_jacobian: float = 0.3, max_halvings: int = 6, min_dot: float = 0.0, tol: float = 1e-4,
            solver: str = "auto") -> tuple[ShellMesh, SmoothResult]:
     """Move vertices along their supports to even out the mesh (paper eq. 6-8).
@@ -926,6 +1001,11 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         only, as in the paper).
     ortho_weight : weight of the quad-corner orthogonality term (beyond the paper; see
         :class:`_Ortho`): zero for right-angled corners of any aspect ratio.
+    warp_weight : weight of the quad planarity term (beyond the paper; see :class:`_Warp`),
+        which flattens the quads whose warp is above ``warp_from`` degrees (measured when the
+        frames are rebuilt) by sliding their corners along their supports; 0 (default) drops
+        it. Not with ``solver="kkt"``.
+    warp_from : warp (degrees) above which a quad is in the planarity term.
     trust : per-step move limit as a fraction of the distance to the nearest other vertex.
     reg : regulariser ``rho_i = reg * (mean diagonal of vertex i's energy block)
         * (1 + curvature_weight * kappa_i)`` with ``kappa_i = 1 - min_f n_i . n_f`` over the incident faces (0 on a
@@ -955,6 +1035,10 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                                   "derive_supports(mesh, ...) for this mesh")
     if solver not in ("auto", "lu", "cg", "kkt"):
         raise ValueError(f"solver must be 'auto', 'lu', 'cg' or 'kkt', got {solver!r}")
+    if not (np.isfinite(warp_weight) and warp_weight >= 0 and np.isfinite(warp_from) and warp_from >= 0):
+        raise ValueError(f"need finite warp_weight >= 0 and warp_from >= 0, got {warp_weight}, {warp_from}")
+    if warp_weight > 0 and solver == "kkt":
+        raise ValueError("the planarity term (warp_weight > 0) needs solver 'auto', 'lu' or 'cg', not 'kkt'")
     if energy not in ("length", "squared"):
         raise ValueError(f"energy must be 'length' or 'squared', got {energy!r}")
     if not (trust > 0 and reg >= 0 and refresh >= 1 and iterations >= 0 and diagonal_weight >= 0):
@@ -976,7 +1060,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     if solver == "auto":
         method = "lu" if int(dof.sum()) <= AUTO_LU_MAX_UNKNOWNS else "cg"
     moves, halvings, rejected, nfact, n_jump, n_fold = [], 0, 0, 0, 0, 0
-    lin = T = nrm = ortho = None
+    lin = T = nrm = ortho = warpt = None
     it = 0
     for it in range(1, iterations + 1):
         if not len(movable):
@@ -1005,6 +1089,15 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                 if method == "kkt":        # full 3n matrix for the literal eq. 8
                     K3 = K3 + ortho_weight * ortho.hessian(3 * np.arange(n), np.full(n, 3),
                                                            np.tile(np.eye(3), (n, 1)), 3 * n)
+            warpt = None
+            if warp_weight > 0 and mesh.n_quads and method != "kkt":
+                warpt = _Warp(P, faces, ~is_tri, scale, lambda v: _support_normals(supports, P, v), warp_from)
+                if len(warpt):
+                    col_start = np.searchsorted(owner, np.arange(n))
+                    H = H + warp_weight * warpt.hessian(col_start, dof, tv, k)
+                    diag_v = diag_v + warp_weight * warpt.block_trace(n)
+                else:
+                    warpt = None
             rho_v = reg * diag_v * (1.0 + curvature_weight * kap)
             H = (H + sparse.diags(rho_v[owner])).tocsc()
             if method != "kkt":
@@ -1016,6 +1109,8 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
             g = K3 @ xc.ravel()
         else:
             g = K3 @ xc.ravel() + ortho_weight * ortho.gradient(xc, n).ravel()
+        if warpt is not None:
+            g = g + warp_weight * warpt.gradient(xc, n).ravel()
         if target_edge is not None and energy == "squared":
             rv = (target_edge * pf)[:, None] * _unit(P[i] - P[j])
             gv = np.zeros((n, 3))
