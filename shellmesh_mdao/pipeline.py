@@ -83,13 +83,18 @@ class PipelineOptions:
                           subdivision (``ortho_weight`` of :func:`~shellmesh_mdao.smooth.smooth`;
                           the pass before subdivision keeps smooth()'s default 1). 3 lifts the
                           worst and the mean scaled Jacobian (docs/benchmarks.md); 0 drops the term.
-    ``smooth_warp_weight`` weight of the quad planarity term in the smoothing before subdivision
-                          (``warp_weight`` of :func:`~shellmesh_mdao.smooth.smooth`): the corners of
-                          quads warped more than ``warp_from`` degrees slide along the input facets
-                          until the quad is flatter. Default 300; 0 drops the term.
-    ``final_warp_weight`` the same after subdivision, applied only while more than 1 % of the quads
-                          are warped more than ``warp_goal`` degrees when the final smoothing starts
-                          (the warp p99 acceptance; ``warp_goal`` 0: always). Default 300.
+    ``final_warp_weight`` weight of the quad planarity term (``warp_weight`` of
+                          :func:`~shellmesh_mdao.smooth.smooth`: the corners of quads warped more than
+                          ``warp_from`` degrees slide along the input facets until the quad is
+                          flatter) in a second smoothing pass after subdivision, run only while more
+                          than 1 % of the quads are warped more than ``warp_goal`` degrees after the
+                          first (the warp p99 acceptance; ``warp_goal`` 0: always). Default 300; 0
+                          drops the pass.
+    ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 0 (off): 300
+                          takes bwb's warp p99 from 10.5 to 9.7 degrees, but it changes the mesh the
+                          subdivision starts from, and on coarse stress layouts that can leave an
+                          element at or below scaled Jacobian 0.2 where the mesh without it has none
+                          (docs/optimisation.md).
     ``warp_from``         warp (degrees) above which a quad is in the planarity term; default 7.
     ``warp_goal``         warp p99 (degrees) the final smoothing's planarity term works towards;
                           default 10 (:data:`~shellmesh_mdao.quality.ACCEPTANCE`).
@@ -109,7 +114,7 @@ class PipelineOptions:
     smooth_jacobian: float = 0.4
     smooth_energy: str = "squared"
     final_ortho_weight: float = 3.0
-    smooth_warp_weight: float = 300.0
+    smooth_warp_weight: float = 0.0
     final_warp_weight: float = 300.0
     warp_from: float = 7.0
     warp_goal: float = 10.0

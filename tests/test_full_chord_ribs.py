@@ -201,8 +201,9 @@ def test_cessna_one_spar_seed89_end_to_end(geometry_dir, manifest):
 @pytest.mark.slow
 def test_quad_stage_repairs_a_poor_element(geometry_dir, manifest):
     """The quad stage's last resort: with smooth_energy='squared', the final smoothing cut to 2
-    steps and the imprint's snap at 0.25 (its default until the crossing check of 2026-11-22; at
-    0.4 this case has no poor element left to repair) the same case leaves one quad at scaled
+    steps, the imprint's snap at 0.25 (its default until the crossing check of 2026-11-22; at
+    0.4 this case has no poor element left to repair) and no planarity pass in the smoothing
+    (none before 2026-11-23) the same case leaves one quad at scaled
     Jacobian 0.196 (with all 10 steps it had one at 0.183 until the imprint's snap fix of d5b79c3,
     none since); untangle on the two rings around
     it moves vertices along their supports (member plane, skin, chains) and lifts it above 0.2
@@ -210,7 +211,8 @@ def test_quad_stage_repairs_a_poor_element(geometry_dir, manifest):
     from shellmesh_mdao.quality import scaled_jacobian
     from shellmesh_mdao.smooth import PLANE
     _, res = _run_draw(geometry_dir, manifest, 89, "cessna210",
-                       options={"smooth_energy": "squared", "final_iterations": 2, "snap": 0.25})
+                       options={"smooth_energy": "squared", "final_iterations": 2, "snap": 0.25,
+                                "smooth_warp_weight": 0.0, "final_warp_weight": 0.0})
     rep = res.report["poor_repair"]
     assert rep["elements_before"] >= 1 and rep["min_before"] <= 0.2
     assert rep["elements_after"] == 0 and rep["min_after"] > 0.2 and rep["moves"] > 0
