@@ -414,7 +414,12 @@ def stage_quad(state: PipelineState) -> PipelineState:
             q, res2 = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy,
                              target_edge=state.size, ortho_weight=o.final_ortho_weight,
                              warp_weight=o.final_warp_weight, warp_from=o.warp_from)
-            res = dataclasses.replace(res2, seconds=res.seconds + res2.seconds, quality_before=res.quality_before)
+            res = dataclasses.replace(
+                res2, quality_before=res.quality_before, moves=res.moves + res2.moves,
+                max_move=max(res.max_move, res2.max_move),
+                **{f: getattr(res, f) + getattr(res2, f) for f in (
+                    "iterations", "seconds", "factorisations", "n_step_halvings", "n_rejected", "n_fold_hits",
+                    "n_jump_hits")})
             wq = element_quality(q.points, q.faces[~q.is_tri])["warp"]
             warp_term.update(applied=True, warp_p99_after=float(np.percentile(wq, 99)))
     sj = scaled_jacobian(q.points, q.faces)

@@ -64,6 +64,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, ProjectionError
 from .mesh import ShellMesh, cross_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
+from .quality import element_quality
 
 __all__ = ["FIXED", "CURVE", "PLANE", "SURFACE", "KIND_NAMES", "Curve", "Supports", "derive_supports",
            "polylines_from_edges", "smooth", "SmoothResult", "mesh_figures", "untangle",
@@ -923,7 +924,6 @@ class _Warp:
 
     def __init__(self, P, faces, is_quad, scale, support_normals, warp_from):
         """``support_normals(verts)``: (k, 3) normal of the support under each vertex."""
-        from .quality import element_quality
         Q = faces[is_quad]
         C = P[Q]
         self.n = _unit(cross_rows(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
@@ -979,7 +979,8 @@ class _Warp:
 
 def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy: str = "length",
            target_edge: float | None = None, diagonal_weight: float = 0.0, ortho_weight: float = 1.0,
-           warp_weight: float = 0.0, warp_from: float = 7.0, trust: float = 0.3, reg: float = 0.25, curvature_weight: float = 10.0, refresh: int = 4,
+           warp_weight: float = 0.0, warp_from: float = 7.0, trust: float = 0.3, reg: float = 0.25,
+           curvature_weight: float = 10.0, refresh: int = 4,
            min_jacobian: float = 0.3, max_halvings: int = 6, min_dot: float = 0.0, tol: float = 1e-4,
            solver: str = "auto") -> tuple[ShellMesh, SmoothResult]:
     """Move vertices along their supports to even out the mesh (paper eq. 6-8).
