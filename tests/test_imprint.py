@@ -395,3 +395,40 @@ def test_chain_deviation_option_refines_the_pipeline_chains():
     assert worst(runs[1]) < worst(runs[0])
     # after improve_skin and coarsen_chains (0.003 x the remesh edge of the imprinted points)
     assert worst(runs[1]) <= (0.002 + 0.003) * REMESH_FACTOR * size
+
+
+def test_bridge_across_a_nose_is_flipped_not_split():
+    """A bridge that is a chord across a rounded nose whose middle is already a skin vertex (the
+    surface midpoint of u-v lies 0.02 from w): splitting it would put a new vertex beside w and
+    leave slivers (cessna210 stress seed 41: 0.14 and 0.67 degrees); split_member_bridges flips
+    it to w-x instead: no new vertex, no bridge left, both triangles facing outwards, every
+    angle above 5 degrees."""
+    from shellmesh_mdao.imprint import (ChainResult, _split_at_surface_midpoints, _tri_angles_min,
+                                        split_member_bridges)
+    from shellmesh_mdao.mesh import ShellMesh
+    from shellmesh_mdao.project import SurfaceLocator
+
+    # input: the half cylinder (x, sin t, cos t), t in [-90, 90] deg, nose line at t = 0
+    x, t = np.meshgrid(np.linspace(-1, 1, 41), np.radians(np.linspace(-90, 90, 181)), indexing="ij")
+    sp = np.stack([x.ravel(), np.sin(t).ravel(), np.cos(t).ravel()], 1)
+    k = np.arange(x.size).reshape(x.shape)
+    a, b, c, d = k[:-1, :-1].ravel(), k[1:, :-1].ravel(), k[1:, 1:].ravel(), k[:-1, 1:].ravel()
+    loc = SurfaceLocator(sp, np.vstack([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]))
+    s60 = np.sin(np.radians(60))
+    P = np.array([[0, -s60, 0.5], [0, s60, 0.5], [0.02, 0, 1.0], [-0.3, 0, 1.0]])  # u, v, w, x
+    T = np.array([[0, 1, 2], [1, 0, 3]])
+    if np.cross(P[1] - P[0], P[2] - P[0])[2] < 0:
+        T = T[:, ::-1].copy()
+    mesh = ShellMesh(P, T, np.zeros(2, np.int32), ["skin", "wing/spar_0"], np.array([0, 1]))
+    chains = [ChainResult("wing/spar_0", "lower", np.array([0])),
+              ChainResult("wing/spar_0", "upper", np.array([1]))]
+    P2, T2, _, _ = _split_at_surface_midpoints(P, T, np.zeros(2, np.int32), np.array([[0, 1]]), loc)
+    assert _tri_angles_min(P2, T2).min() < 5.0                     # what the split alone would leave
+    out = split_member_bridges(mesh, chains, loc)
+    assert out.n_points == 4
+    edges = {tuple(e) for e in out.topology().edges.tolist()}
+    assert (0, 1) not in edges and (2, 3) in edges
+    assert _tri_angles_min(out.points, out.faces).min() > 5.0
+    n = np.cross(out.points[out.faces[:, 1]] - out.points[out.faces[:, 0]],
+                 out.points[out.faces[:, 2]] - out.points[out.faces[:, 0]])
+    assert (n[:, 2] > 0).all() and out.check().ok
