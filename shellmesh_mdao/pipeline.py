@@ -92,9 +92,8 @@ class PipelineOptions:
                           drops the pass.
     ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 0 (off): 300
                           takes bwb's warp p99 from 10.5 to 9.7 degrees, but it changes the mesh the
-                          subdivision starts from, and on coarse stress layouts that can leave an
-                          element at or below scaled Jacobian 0.2 where the mesh without it has none
-                          (docs/optimisation.md).
+                          subdivision starts from, and on coarse stress layouts that can leave skin
+                          nodes off the surface where the mesh without it has none (docs/optimisation.md).
     ``warp_from``         warp (degrees) above which a quad is in the planarity term; default 7.
     ``warp_goal``         warp p99 (degrees) the final smoothing's planarity term works towards;
                           default 10 (:data:`~shellmesh_mdao.quality.ACCEPTANCE`).
