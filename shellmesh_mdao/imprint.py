@@ -750,8 +750,8 @@ def _flip_bridges(P, T, C, bridges, on, fe, locator, near: float = 0.25, min_ang
     vertex) are flipped instead of split: splitting there would put a new vertex beside that
     one and leave slivers (cessna210 stress seed 41: 0.14 and 0.67 degrees). A flip is made
     only between two triangles of one component, when the new edge is new, not a bridge
-    itself, both new triangles keep their orientation and have angles of ``min_angle`` or more;
-    flips share no triangle. Returns ``(T, bridges still to split)``."""
+    itself, both new triangles keep their orientation and have angles of ``min_angle`` or more,
+    and no other candidate flip shares a triangle with it. Returns ``(T, bridges still to split)``."""
     n = len(P)
     a, b = T, np.roll(T, -1, axis=1)
     key = (a * n + b).ravel()                                   # directed half-edges
@@ -767,8 +767,7 @@ def _flip_bridges(P, T, C, bridges, on, fe, locator, near: float = 0.25, min_ang
     h0, h1 = half(u, v), half(v, u)                             # t0 runs u->v, t1 runs v->u
     ok = (h0 >= 0) & (h1 >= 0)
     if len(fe):
-        fkeys = np.sort(fe, axis=1)
-        ok &= ~np.isin(u * n + v, fkeys[:, 0] * n + fkeys[:, 1])
+        ok &= ~_has_edge(_edge_keys(fe, n), u, v, n)               # a crease: never flipped
     t0, t1 = np.where(ok, h0 // 3, 0), np.where(ok, h1 // 3, 0)
     w0 = T[t0, (h0 % 3 + 2) % 3]
     w1 = T[t1, (h1 % 3 + 2) % 3]
@@ -778,25 +777,20 @@ def _flip_bridges(P, T, C, bridges, on, fe, locator, near: float = 0.25, min_ang
     dw = np.minimum(np.linalg.norm(mid - P[w0], axis=1), np.linalg.norm(mid - P[w1], axis=1))
     ok &= dw < near * L
     ok &= ~(on[w0] & on[w1]).any(1)                             # the new edge is no bridge
-    ekeys = np.unique(np.minimum(a, b).ravel() * n + np.maximum(a, b).ravel())
-    ok &= ~np.isin(np.minimum(w0, w1) * n + np.maximum(w0, w1), ekeys)
+    ok &= ~_has_edge(_edge_keys(T, n), w0, w1, n)
     new0 = np.stack([u, w1, w0], 1)
     new1 = np.stack([v, w0, w1], 1)
     n_old = _unit_normals(P[T[t0]]) + _unit_normals(P[T[t1]])
     ok &= (np.einsum("ij,ij->i", _unit_normals(P[new0]), n_old) > 0) & \
           (np.einsum("ij,ij->i", _unit_normals(P[new1]), n_old) > 0)
     ok &= np.minimum(_tri_angles_min(P, new0), _tri_angles_min(P, new1)) >= min_angle
-    # one flip per triangle (in bridge order)
+    # flips share no triangle: a bridge whose triangle another candidate also has is split instead
     idx = np.flatnonzero(ok)
-    used = np.zeros(len(T), bool)
-    take = []
-    for i in idx.tolist():                                      # a handful of bridges
-        if not used[t0[i]] and not used[t1[i]]:
-            used[t0[i]] = used[t1[i]] = True
-            take.append(i)
-    if not take:
+    tris = np.concatenate([t0[idx], t1[idx]])
+    alone = np.bincount(tris, minlength=len(T))[tris] == 1
+    take = idx[alone[:len(idx)] & alone[len(idx):]]
+    if not len(take):
         return T, bridges
-    take = np.asarray(take)
     T = T.copy()
     T[t0[take]] = new0[take]
     T[t1[take]] = new1[take]
@@ -1419,7 +1413,7 @@ _COS_TURN = np.cos(np.radians(45.0))
 
 
 def _edge_keys(T, n):
-    """Sorted unique keys ``min * n + max`` of the edges of triangles T."""
+    """Sorted unique keys ``min * n + max`` of the edges of triangles T (or of edges T, (k, 2))."""
     a, b = T.ravel(), np.roll(T, -1, axis=1).ravel()
     return np.unique(np.minimum(a, b) * n + np.maximum(a, b))
 

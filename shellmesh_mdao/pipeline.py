@@ -24,7 +24,7 @@ import numpy as np
 
 from .errors import SizeError, ShellMeshError
 from .mesh import ShellMesh
-from .quality import element_quality, scaled_jacobian
+from .quality import scaled_jacobian, warp
 
 log = logging.getLogger("shellmesh_mdao")
 
@@ -388,6 +388,11 @@ def stage_smooth(state: PipelineState) -> PipelineState:
     return st
 
 
+def _warp_p99(mesh: ShellMesh) -> float:
+    """99th percentile of the quads' warp (degrees; 0 without quads), the acceptance's measure."""
+    return float(np.percentile(warp(mesh.points, mesh.faces[~mesh.is_tri]), 99)) if mesh.n_quads else 0.0
+
+
 def stage_quad(state: PipelineState) -> PipelineState:
     """One subdivision to all quads (quad -> 4, triangle -> 3) over skin and members, new nodes
     projected onto their supports, then a final smoothing pass; elements still at or below
@@ -406,8 +411,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
                         ortho_weight=o.final_ortho_weight)
         # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
         # where the warp p99 acceptance is missed
-        wq = element_quality(q.points, q.faces[~q.is_tri])["warp"] if q.n_quads else np.zeros(0)
-        p99 = float(np.percentile(wq, 99)) if len(wq) else 0.0
+        p99 = _warp_p99(q)
         warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
         if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal):
             q, res2 = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy,
@@ -419,8 +423,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
                 **{f: getattr(res, f) + getattr(res2, f) for f in (
                     "iterations", "seconds", "factorisations", "n_step_halvings", "n_rejected", "n_fold_hits",
                     "n_jump_hits")})
-            wq = element_quality(q.points, q.faces[~q.is_tri])["warp"]
-            warp_term.update(applied=True, warp_p99_after=float(np.percentile(wq, 99)))
+            warp_term.update(applied=True, warp_p99_after=_warp_p99(q))
     sj = scaled_jacobian(q.points, q.faces)
     poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     repair = None

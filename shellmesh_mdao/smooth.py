@@ -64,7 +64,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, ProjectionError
 from .mesh import ShellMesh, cross_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
-from .quality import element_quality
+from .quality import warp
 
 __all__ = ["FIXED", "CURVE", "PLANE", "SURFACE", "KIND_NAMES", "Curve", "Supports", "derive_supports",
            "polylines_from_edges", "smooth", "SmoothResult", "mesh_figures", "untangle",
@@ -928,7 +928,7 @@ class _Warp:
         C = P[Q]
         self.n = _unit(cross_rows(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
         ld = 0.5 * (_norm(C[:, 2] - C[:, 0]) + _norm(C[:, 3] - C[:, 1])) if len(Q) else np.zeros(0)
-        sel = (ld > 0) & (element_quality(P, Q)["warp"] > warp_from) if len(Q) else np.zeros(0, bool)
+        sel = (ld > 0) & (warp(P, Q) > warp_from) if len(Q) else np.zeros(0, bool)
         self.q, self.n, ld = Q[sel], self.n[sel], ld[sel]
         self.s = 1.0 / ld
         self.w = scale * ld
