@@ -88,12 +88,16 @@ class PipelineOptions:
                           ``warp_from`` degrees slide along the input facets until the quad is
                           flatter) in a second smoothing pass after subdivision, run only while more
                           than 1 % of the quads are warped more than ``warp_goal`` degrees after the
-                          first (the warp p99 acceptance; ``warp_goal`` 0: always). Default 300; 0
-                          drops the pass.
-    ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 0 (off): 300
-                          takes bwb's warp p99 from 10.5 to 9.7 degrees, but it changes the mesh the
-                          subdivision starts from, and on coarse stress layouts that can leave skin
-                          nodes off the surface where the mesh without it has none (docs/optimisation.md).
+                          first (the warp p99 acceptance; ``warp_goal`` 0: always), and moving only the
+                          nodes within two rings of the quads warped more than ``warp_from``. Default
+                          300; 0 drops the pass.
+    ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 300 (bwb's
+                          warp p99 10.5 -> 9.8 degrees); 0 drops it.
+    ``smooth_warp_spread`` the term before subdivision leaves out the quads whose corners' input
+                          facets are turned more than this many degrees apart (a face draped over a
+                          tip cap or nose much tighter than itself: pulling at it dragged its corners
+                          across the crease, and the subdivision then left nodes off the surface).
+                          Default 75.
     ``warp_from``         warp (degrees) above which a quad is in the planarity term; default 7.
     ``warp_goal``         warp p99 (degrees) the final smoothing's planarity term works towards;
                           default 10 (:data:`~shellmesh_mdao.quality.ACCEPTANCE`).
@@ -113,8 +117,9 @@ class PipelineOptions:
     smooth_jacobian: float = 0.4
     smooth_energy: str = "squared"
     final_ortho_weight: float = 3.0
-    smooth_warp_weight: float = 0.0
+    smooth_warp_weight: float = 300.0
     final_warp_weight: float = 300.0
+    smooth_warp_spread: float = 75.0
     warp_from: float = 7.0
     warp_goal: float = 10.0
 
@@ -141,6 +146,9 @@ class PipelineOptions:
         if not out.get("snap", 0.0) < 0.5:
             raise ShellMeshError(f"solver option 'snap' must be below 0.5 (a fraction of a vertex's shortest "
                                  f"incident edge), got {out['snap']!r}")
+        if not 0 < out.get("smooth_warp_spread", 75.0) <= 180:
+            raise ShellMeshError(f"solver option 'smooth_warp_spread' must be in (0, 180] degrees, got "
+                                 f"{out['smooth_warp_spread']!r}")
         if out.get("smooth_energy", "length") not in ("length", "squared"):
             raise ShellMeshError(f"solver option 'smooth_energy' must be 'length' or 'squared', got "
                                  f"{out['smooth_energy']!r}")
@@ -382,7 +390,7 @@ def stage_smooth(state: PipelineState) -> PipelineState:
     mesh, res = smooth(state.mesh, state.supports, iterations=state.options.smooth_iterations,
                        min_jacobian=state.options.smooth_jacobian, energy=state.options.smooth_energy,
                        target_edge=REMESH_FACTOR * state.size, warp_weight=state.options.smooth_warp_weight,
-                       warp_from=state.options.warp_from)
+                       warp_from=state.options.warp_from, warp_spread=state.options.smooth_warp_spread)
     st = state.but(mesh=mesh, stage="smooth")
     st.report["smooth"] = _smooth_report(res)
     return st
@@ -414,16 +422,21 @@ def stage_quad(state: PipelineState) -> PipelineState:
         p99 = _warp_p99(q)
         warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
         if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal):
+            # only around the warped quads (two rings): the rest of the mesh keeps the first pass
+            vptr, vface = vertex_faces(q.faces, q.n_points)
+            region = _face_rings(q.faces, vptr, vface, np.unique(q.faces[warp(q.points, q.faces) > o.warp_from]), 2)
+            movable = np.unique(q.faces[region])
+            movable = movable[movable >= 0]
             q, res2 = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy,
                              target_edge=state.size, ortho_weight=o.final_ortho_weight,
-                             warp_weight=o.final_warp_weight, warp_from=o.warp_from)
+                             warp_weight=o.final_warp_weight, warp_from=o.warp_from, vertices=movable)
             res = dataclasses.replace(
                 res2, quality_before=res.quality_before, moves=res.moves + res2.moves,
                 max_move=max(res.max_move, res2.max_move),
                 **{f: getattr(res, f) + getattr(res2, f) for f in (
                     "iterations", "seconds", "factorisations", "n_step_halvings", "n_rejected", "n_fold_hits",
                     "n_jump_hits")})
-            warp_term.update(applied=True, warp_p99_after=_warp_p99(q))
+            warp_term.update(applied=True, warp_p99_after=_warp_p99(q), vertices=int(len(movable)))
     sj = scaled_jacobian(q.points, q.faces)
     poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     repair = None

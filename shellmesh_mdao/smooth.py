@@ -274,6 +274,14 @@ class Supports:
                         np.concatenate([self.ref, np.asarray(ref, np.int64)]), self._surf, self.planes,
                         self.curves, self.comp_kind, self.comp_ref, self.edge_pairs, self.edge_curve)
 
+    def held(self, movable) -> "Supports":
+        """Copy in which every vertex not in ``movable`` (ids) is FIXED (same surfaces,
+        planes, curves)."""
+        keep = np.zeros(self.n, bool)
+        keep[np.asarray(movable, np.int64).reshape(-1)] = True
+        return Supports(np.where(keep, self.kind, FIXED), np.where(keep, self.ref, -1), self._surf, self.planes,
+                        self.curves, self.comp_kind, self.comp_ref, self.edge_pairs, self.edge_curve)
+
     def curve_of_edges(self, pairs) -> np.ndarray:
         """Curve id of each node pair (-1 where the pair is not a feature edge with a curve)."""
         pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
@@ -922,18 +930,29 @@ class _Warp:
 
     SIGMA = np.array([1.0, -1.0, 1.0, -1.0])
 
-    def __init__(self, P, faces, is_quad, scale, support_normals, warp_from):
-        """``support_normals(verts)``: (k, 3) normal of the support under each vertex."""
+    def __init__(self, P, faces, is_quad, scale, support_normals, warp_from, warp_spread=180.0):
+        """``support_normals(verts)``: (k, 3) normal of the support under each vertex; quads
+        whose corners' support normals are more than ``warp_spread`` degrees apart are left out."""
         Q = faces[is_quad]
         C = P[Q]
         self.n = _unit(cross_rows(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
         ld = 0.5 * (_norm(C[:, 2] - C[:, 0]) + _norm(C[:, 3] - C[:, 1])) if len(Q) else np.zeros(0)
         sel = (ld > 0) & (warp(P, Q) > warp_from) if len(Q) else np.zeros(0, bool)
-        self.q, self.n, ld = Q[sel], self.n[sel], ld[sel]
+        q, n, ld = Q[sel], self.n[sel], ld[sel]
+        verts, inv = np.unique(q, return_inverse=True)
+        fq = support_normals(verts)[inv.reshape(q.shape)]          # (m, 4, 3)
+        if warp_spread < 180.0 and len(q):
+            # a quad draped over a crease or round much tighter than itself (its corners'
+            # supports turned more than warp_spread apart) cannot be flattened by sliding
+            # along them; pulling at it only drags its corners across the crease
+            on = _dot(fq.reshape(-1, 3), fq.reshape(-1, 3)).reshape(-1, 4) > 0.5   # curves: f = 0
+            cij = np.einsum("mij,mkj->mik", fq, fq)
+            cmin = np.where(on[:, :, None] & on[:, None, :], cij, 1.0).min((1, 2))
+            keep = cmin >= np.cos(np.radians(warp_spread))
+            q, n, ld, fq = q[keep], n[keep], ld[keep], fq[keep]
+        self.q, self.n = q, n
         self.s = 1.0 / ld
         self.w = scale * ld
-        verts, inv = np.unique(self.q, return_inverse=True)
-        fq = support_normals(verts)[inv.reshape(self.q.shape)]          # (m, 4, 3)
         self.m = self.n[:, None, :] - np.einsum("mj,mkj->mk", self.n, fq)[:, :, None] * fq
 
     def __len__(self):
@@ -979,7 +998,7 @@ class _Warp:
 
 def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy: str = "length",
            target_edge: float | None = None, diagonal_weight: float = 0.0, ortho_weight: float = 1.0,
-           warp_weight: float = 0.0, warp_from: float = 7.0, trust: float = 0.3, reg: float = 0.25,
+           warp_weight: float = 0.0, warp_from: float = 7.0, warp_spread: float = 180.0, vertices=None, trust: float = 0.3, reg: float = 0.25,
            curvature_weight: float = 10.0, refresh: int = 4,
            min_jacobian: float = 0.3, max_halvings: int = 6, min_dot: float = 0.0, tol: float = 1e-4,
            solver: str = "auto") -> tuple[ShellMesh, SmoothResult]:
@@ -1007,6 +1026,12 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         frames are rebuilt) by sliding their corners along their supports; 0 (default) drops
         it. Not with ``solver="kkt"``.
     warp_from : warp (degrees) above which a quad is in the planarity term.
+    warp_spread : a quad whose corners' support normals (input facets, member planes) are
+        more than this many degrees apart is left out of the planarity term: it is draped
+        over a crease or round much tighter than itself and cannot be flattened by sliding
+        its corners. Default 180 (none left out).
+    vertices : ids of the vertices that may move (default None: all); the others hold
+        still, as if FIXED, and only constrain the step (fold guard, energy).
     trust : per-step move limit as a fraction of the distance to the nearest other vertex.
     reg : regulariser ``rho_i = reg * (mean diagonal of vertex i's energy block)
         * (1 + curvature_weight * kappa_i)`` with ``kappa_i = 1 - min_f n_i . n_f`` over the incident faces (0 on a
@@ -1036,8 +1061,10 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                                   "derive_supports(mesh, ...) for this mesh")
     if solver not in ("auto", "lu", "cg", "kkt"):
         raise ValueError(f"solver must be 'auto', 'lu', 'cg' or 'kkt', got {solver!r}")
-    if not (np.isfinite(warp_weight) and warp_weight >= 0 and np.isfinite(warp_from) and warp_from >= 0):
-        raise ValueError(f"need finite warp_weight >= 0 and warp_from >= 0, got {warp_weight}, {warp_from}")
+    if not (np.isfinite(warp_weight) and warp_weight >= 0 and np.isfinite(warp_from) and warp_from >= 0
+            and 0 < warp_spread <= 180):
+        raise ValueError(f"need finite warp_weight >= 0, warp_from >= 0 and 0 < warp_spread <= 180, got "
+                         f"{warp_weight}, {warp_from}, {warp_spread}")
     if warp_weight > 0 and solver == "kkt":
         raise ValueError("the planarity term (warp_weight > 0) needs solver 'auto', 'lu' or 'cg', not 'kkt'")
     if energy not in ("length", "squared"):
@@ -1047,6 +1074,8 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     if target_edge is not None and not (np.isfinite(target_edge) and target_edge > 0):
         from .errors import SizeError
         raise SizeError(f"target_edge must be a positive length, got {target_edge}")
+    if vertices is not None:
+        supports = supports.held(vertices)
     n = mesh.n_points
     P = mesh.points.copy()
     faces, is_tri = mesh.faces, mesh.is_tri
@@ -1092,7 +1121,8 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                                                            np.tile(np.eye(3), (n, 1)), 3 * n)
             warpt = None
             if warp_weight > 0 and mesh.n_quads and method != "kkt":
-                warpt = _Warp(P, faces, ~is_tri, scale, lambda v: _support_normals(supports, P, v), warp_from)
+                warpt = _Warp(P, faces, ~is_tri, scale, lambda v: _support_normals(supports, P, v), warp_from,
+                              warp_spread)
                 if len(warpt):
                     col_start = np.searchsorted(owner, np.arange(n))
                     H = H + warp_weight * warpt.hessian(col_start, dof, tv, k)

@@ -459,3 +459,62 @@ def test_warp_weight_flattens_quads_over_a_kink_and_keeps_them_on_the_surface():
         smooth(mesh, sup, warp_weight=-1.0)
     with pytest.raises(ValueError, match="kkt"):
         smooth(mesh, sup, warp_weight=1.0, solver="kkt")
+
+
+def test_warp_spread_leaves_out_quads_draped_over_a_tight_crease():
+    """_Warp(warp_spread=s): a warped quad whose corners' support normals are more than s degrees
+    apart (draped over a crease much tighter than itself) is not in the term; corners on curves
+    and fixed corners (zero normal) do not count. On a roof with a 100 degree ridge the six ridge
+    quads with all four corners on the roof are left out at spread 75 (the two at the fixed border
+    stay); on the 24 degree roof the limit changes nothing, bit for bit."""
+    from shellmesh_mdao.smooth import _Warp
+    rng = np.random.default_rng(5)
+    P, F, _ = grid(3, 1)
+    P[:, 2] = rng.uniform(-0.2, 0.2, len(P))                      # three twisted quads
+    up, side = np.array([0.0, 0.0, 1.0]), np.array([np.sin(np.radians(80)), 0.0, np.cos(np.radians(80))])
+    tilt = np.array([np.sin(np.radians(20)), 0.0, np.cos(np.radians(20))])
+    nrm = np.tile(up, (len(P), 1))
+    nrm[F[0, :2]] = side                                           # quad 0: corners 80 deg apart
+    nrm[F[1, :2]] = tilt                                           # quad 1: 20 deg apart
+    nrm[F[2, 2]] = side * 0.0                                      # quad 2: one corner on a curve
+    assert len(_Warp(P, F, np.ones(3, bool), 1.0, lambda v: nrm[v], 1.0)) == 3
+    term = _Warp(P, F, np.ones(3, bool), 1.0, lambda v: nrm[v], 1.0, warp_spread=75.0)
+    assert sorted(map(tuple, np.sort(term.q, 1))) == sorted(map(tuple, np.sort(F[1:], 1)))
+    from shellmesh_mdao.quality import warp
+    from shellmesh_mdao.smooth import _support_normals
+    sharp, sup = _roof(kink_deg=100.0)
+    P, F = sharp.points, sharp.faces
+    normals = lambda v: _support_normals(sup, P, v)               # noqa: E731
+    ridge = np.flatnonzero(warp(P, F) > 2.0)                      # folded by 80 deg over the ridge
+    on_surface = (sup.kind[F[ridge]] == SURFACE).sum(1)
+    assert len(ridge) == 8 and len(_Warp(P, F, np.ones(len(F), bool), 1.0, normals, 2.0)) == 8
+    term = _Warp(P, F, np.ones(len(F), bool), 1.0, normals, 2.0, warp_spread=75.0)
+    assert np.array_equal(np.sort(term.q, 1), np.sort(F[ridge[on_surface < 2]], 1))   # fixed corners: no normal
+    assert (on_surface == 4).sum() == 6
+    mesh, sup = _roof()
+    a, _ = smooth(mesh, sup, iterations=10, warp_weight=300.0, warp_from=2.0, warp_spread=75.0)
+    b, _ = smooth(mesh, sup, iterations=10, warp_weight=300.0, warp_from=2.0)
+    assert a.points.tobytes() == b.points.tobytes()
+    with pytest.raises(ValueError, match="warp_spread"):
+        smooth(mesh, sup, warp_spread=0.0)
+
+
+def test_smooth_vertices_moves_only_those_and_keeps_them_on_the_surface():
+    """smooth(vertices=ids): only those vertices move (the others hold still bit for bit, as
+    with Supports.held(ids), which makes every other vertex FIXED); the moved ones stay on the
+    input surface and no element falls below min(its own, 0.3)."""
+    mesh, sup = _roof()
+    free = np.flatnonzero(sup.kind != FIXED)
+    some = free[: len(free) // 2]
+    held = sup.held(some)
+    assert (held.kind[some] == sup.kind[some]).all() and (held.ref[some] == sup.ref[some]).all()
+    rest = np.setdiff1d(np.arange(sup.n), some)
+    assert (held.kind[rest] == FIXED).all() and (held.ref[rest] == -1).all()
+    part, _ = smooth(mesh, sup, iterations=10, warp_weight=300.0, warp_from=2.0, vertices=some)
+    same, _ = smooth(mesh, held, iterations=10, warp_weight=300.0, warp_from=2.0)
+    assert part.points.tobytes() == same.points.tobytes()
+    moved = np.flatnonzero(np.any(part.points != mesh.points, axis=1))
+    assert len(moved) > len(some) // 2 and np.isin(moved, some).all()
+    assert sup.distance(part.points).max() <= 1e-9 * mesh.diagonal
+    sj0 = scaled_jacobian(mesh.points, mesh.faces)
+    assert (scaled_jacobian(part.points, part.faces) >= np.minimum(sj0, 0.3) - 1e-12).all()
