@@ -998,8 +998,8 @@ class _Warp:
 
 def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy: str = "length",
            target_edge: float | None = None, diagonal_weight: float = 0.0, ortho_weight: float = 1.0,
-           warp_weight: float = 0.0, warp_from: float = 7.0, warp_spread: float = 180.0, vertices=None, trust: float = 0.3, reg: float = 0.25,
-           curvature_weight: float = 10.0, refresh: int = 4,
+           warp_weight: float = 0.0, warp_from: float = 7.0, warp_spread: float = 180.0, vertices=None,
+           trust: float = 0.3, reg: float = 0.25, curvature_weight: float = 10.0, refresh: int = 4,
            min_jacobian: float = 0.3, max_halvings: int = 6, min_dot: float = 0.0, tol: float = 1e-4,
            solver: str = "auto") -> tuple[ShellMesh, SmoothResult]:
     """Move vertices along their supports to even out the mesh (paper eq. 6-8).
@@ -1075,6 +1075,9 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         from .errors import SizeError
         raise SizeError(f"target_edge must be a positive length, got {target_edge}")
     if vertices is not None:
+        vertices = np.asarray(vertices, np.int64).reshape(-1)
+        if len(vertices) and (vertices.min() < 0 or vertices.max() >= mesh.n_points):
+            raise ValueError(f"vertices must be ids of mesh vertices (0 to {mesh.n_points - 1})")
         supports = supports.held(vertices)
     n = mesh.n_points
     P = mesh.points.copy()

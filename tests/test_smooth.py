@@ -518,3 +518,5 @@ def test_smooth_vertices_moves_only_those_and_keeps_them_on_the_surface():
     assert sup.distance(part.points).max() <= 1e-9 * mesh.diagonal
     sj0 = scaled_jacobian(mesh.points, mesh.faces)
     assert (scaled_jacobian(part.points, part.faces) >= np.minimum(sj0, 0.3) - 1e-12).all()
+    with pytest.raises(ValueError, match="vertices must be ids"):
+        smooth(mesh, sup, vertices=[mesh.n_points])
