@@ -93,11 +93,11 @@ class PipelineOptions:
                           300; 0 drops the pass.
     ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 300 (bwb's
                           warp p99 10.5 -> 9.8 degrees); 0 drops it.
-    ``smooth_warp_spread`` the term before subdivision leaves out the quads whose corners' input
-                          facets are turned more than this many degrees apart (a face draped over a
-                          tip cap or nose much tighter than itself: pulling at it dragged its corners
-                          across the crease, and the subdivision then left nodes off the surface).
-                          Default 75.
+    ``smooth_warp_spread`` the term before subdivision leaves out the quads that share a vertex with
+                          a face whose corners' input facets are turned more than this many degrees
+                          apart (a face draped over a tip cap or nose much tighter than itself:
+                          pulling there dragged nodes across the crease, and the subdivision then left
+                          nodes off the surface). Default 75.
     ``warp_from``         warp (degrees) above which a quad is in the planarity term; default 7.
     ``warp_goal``         warp p99 (degrees) the final smoothing's planarity term works towards;
                           default 10 (:data:`~shellmesh_mdao.quality.ACCEPTANCE`).

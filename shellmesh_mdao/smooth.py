@@ -911,6 +911,23 @@ class _Ortho:
         return (J.T @ J).tocsr()
 
 
+def _draped_vertices(P, faces, support_normals, spread):
+    """(n,) bool: the vertices of the faces (quads and triangles) whose corners' support
+    normals are more than ``spread`` degrees apart; corners without a support normal (fixed,
+    on a curve) do not count."""
+    fv = np.where(faces >= 0, faces, faces[:, :1])                 # a triangle repeats a corner
+    used = np.unique(fv)
+    nrm = np.zeros((len(P), 3))
+    nrm[used] = support_normals(used)
+    f = nrm[fv]                                                     # (m, 4, 3)
+    on = np.einsum("mij,mij->mi", f, f) > 0.5
+    c = np.einsum("mij,mkj->mik", f, f)
+    cmin = np.where(on[:, :, None] & on[:, None, :], c, 1.0).min((1, 2))
+    out = np.zeros(len(P), bool)
+    out[fv[cmin < np.cos(np.radians(spread))].ravel()] = True
+    return out
+
+
 class _Warp:
     """Planarity term of the quads (beyond the paper). For every quad (a, b, c, d) whose warp
     is above ``warp_from`` degrees the residual
@@ -932,24 +949,23 @@ class _Warp:
 
     def __init__(self, P, faces, is_quad, scale, support_normals, warp_from, warp_spread=180.0):
         """``support_normals(verts)``: (k, 3) normal of the support under each vertex; quads
-        whose corners' support normals are more than ``warp_spread`` degrees apart are left out."""
+        that share a vertex with a face whose corners' support normals are more than
+        ``warp_spread`` degrees apart (the quad itself included) are left out."""
         Q = faces[is_quad]
         C = P[Q]
         self.n = _unit(cross_rows(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
         ld = 0.5 * (_norm(C[:, 2] - C[:, 0]) + _norm(C[:, 3] - C[:, 1])) if len(Q) else np.zeros(0)
         sel = (ld > 0) & (warp(P, Q) > warp_from) if len(Q) else np.zeros(0, bool)
         q, n, ld = Q[sel], self.n[sel], ld[sel]
+        if warp_spread < 180.0 and len(q):
+            # a face draped over a crease or round much tighter than itself (its corners'
+            # supports turned more than warp_spread apart) cannot be flattened by sliding its
+            # corners; pulling at it, or at a quad beside it, drags nodes across the crease
+            near = _draped_vertices(P, faces, support_normals, warp_spread)
+            keep = ~near[q].any(1)
+            q, n, ld = q[keep], n[keep], ld[keep]
         verts, inv = np.unique(q, return_inverse=True)
         fq = support_normals(verts)[inv.reshape(q.shape)]          # (m, 4, 3)
-        if warp_spread < 180.0 and len(q):
-            # a quad draped over a crease or round much tighter than itself (its corners'
-            # supports turned more than warp_spread apart) cannot be flattened by sliding
-            # along them; pulling at it only drags its corners across the crease
-            on = _dot(fq.reshape(-1, 3), fq.reshape(-1, 3)).reshape(-1, 4) > 0.5   # curves: f = 0
-            cij = np.einsum("mij,mkj->mik", fq, fq)
-            cmin = np.where(on[:, :, None] & on[:, None, :], cij, 1.0).min((1, 2))
-            keep = cmin >= np.cos(np.radians(warp_spread))
-            q, n, ld, fq = q[keep], n[keep], ld[keep], fq[keep]
         self.q, self.n = q, n
         self.s = 1.0 / ld
         self.w = scale * ld
@@ -1026,10 +1042,11 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         frames are rebuilt) by sliding their corners along their supports; 0 (default) drops
         it. Not with ``solver="kkt"``.
     warp_from : warp (degrees) above which a quad is in the planarity term.
-    warp_spread : a quad whose corners' support normals (input facets, member planes) are
-        more than this many degrees apart is left out of the planarity term: it is draped
-        over a crease or round much tighter than itself and cannot be flattened by sliding
-        its corners. Default 180 (none left out).
+    warp_spread : a quad that shares a vertex with a face (itself included) whose corners'
+        support normals (input facets, member planes) are more than this many degrees apart
+        is left out of the planarity term: that face is draped over a crease or round much
+        tighter than itself and cannot be flattened by sliding its corners, and pulling at it
+        or beside it drags nodes across the crease. Default 180 (none left out).
     vertices : ids of the vertices that may move (default None: all); the others hold
         still, as if FIXED, and only constrain the step (fold guard, energy).
     trust : per-step move limit as a fraction of the distance to the nearest other vertex.
