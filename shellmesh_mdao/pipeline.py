@@ -92,7 +92,7 @@ class PipelineOptions:
                           nodes within two rings of the quads warped more than ``warp_from``. Default
                           300; 0 drops the pass.
     ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 300 (bwb's
-                          warp p99 10.5 -> 9.8 degrees); 0 drops it.
+                          warp p99 10.5 -> 9.7 degrees); 0 drops it.
     ``smooth_warp_spread`` the term before subdivision leaves out the quads that share a vertex with
                           a face whose corners' input facets are turned more than this many degrees
                           apart (a face draped over a tip cap or nose much tighter than itself:
@@ -424,7 +424,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
         if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal):
             # only around the warped quads (two rings): the rest of the mesh keeps the first pass
             vptr, vface = vertex_faces(q.faces, q.n_points)
-            region = _face_rings(q.faces, vptr, vface, np.unique(q.faces[warp(q.points, q.faces) > o.warp_from]), 2)
+            warped = np.unique(q.faces[warp(q.points, q.faces) > o.warp_from])
+            region = _face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
             movable = np.unique(q.faces[region])
             movable = movable[movable >= 0]
             q, res2 = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy,
