@@ -396,9 +396,12 @@ def stage_smooth(state: PipelineState) -> PipelineState:
     return st
 
 
-def _warp_p99(mesh: ShellMesh) -> float:
-    """99th percentile of the quads' warp (degrees; 0 without quads), the acceptance's measure."""
-    return float(np.percentile(warp(mesh.points, mesh.faces[~mesh.is_tri]), 99)) if mesh.n_quads else 0.0
+def _warp_p99(mesh: ShellMesh, w: np.ndarray | None = None) -> float:
+    """99th percentile of the quads' warp (degrees; 0 without quads), the acceptance's measure;
+    ``w``: the warp of every face, if already measured."""
+    if not mesh.n_quads:
+        return 0.0
+    return float(np.percentile(warp(mesh.points, mesh.faces)[~mesh.is_tri] if w is None else w[~mesh.is_tri], 99))
 
 
 def stage_quad(state: PipelineState) -> PipelineState:
@@ -419,12 +422,13 @@ def stage_quad(state: PipelineState) -> PipelineState:
                         ortho_weight=o.final_ortho_weight)
         # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
         # where the warp p99 acceptance is missed
-        p99 = _warp_p99(q)
+        wq = warp(q.points, q.faces)
+        p99 = _warp_p99(q, wq)
         warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
         if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal):
             # only around the warped quads (two rings): the rest of the mesh keeps the first pass
             vptr, vface = vertex_faces(q.faces, q.n_points)
-            warped = np.unique(q.faces[warp(q.points, q.faces) > o.warp_from])
+            warped = np.unique(q.faces[wq > o.warp_from])
             region = _face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
             movable = np.unique(q.faces[region])
             movable = movable[movable >= 0]

@@ -911,14 +911,11 @@ class _Ortho:
         return (J.T @ J).tocsr()
 
 
-def _draped_vertices(P, faces, support_normals, spread):
+def _draped_vertices(P, faces, nrm, spread):
     """(n,) bool: the vertices of the faces (quads and triangles) whose corners' support
-    normals are more than ``spread`` degrees apart; corners without a support normal (fixed,
-    on a curve) do not count."""
+    normals ``nrm`` (n, 3) are more than ``spread`` degrees apart; corners without a support
+    normal (zero: fixed, on a curve) do not count."""
     fv = np.where(faces >= 0, faces, faces[:, :1])                 # a triangle repeats a corner
-    used = np.unique(fv)
-    nrm = np.zeros((len(P), 3))
-    nrm[used] = support_normals(used)
     f = nrm[fv]                                                     # (m, 4, 3)
     on = np.einsum("mij,mij->mi", f, f) > 0.5
     c = np.einsum("mij,mkj->mik", f, f)
@@ -961,11 +958,15 @@ class _Warp:
             # a face draped over a crease or round much tighter than itself (its corners'
             # supports turned more than warp_spread apart) cannot be flattened by sliding its
             # corners; pulling at it, or at a quad beside it, drags nodes across the crease
-            near = _draped_vertices(P, faces, support_normals, warp_spread)
-            keep = ~near[q].any(1)
+            used = np.unique(faces[faces >= 0])
+            nrm = np.zeros((len(P), 3))
+            nrm[used] = support_normals(used)
+            keep = ~_draped_vertices(P, faces, nrm, warp_spread)[q].any(1)
             q, n, ld = q[keep], n[keep], ld[keep]
-        verts, inv = np.unique(q, return_inverse=True)
-        fq = support_normals(verts)[inv.reshape(q.shape)]          # (m, 4, 3)
+            fq = nrm[q]                                                 # (m, 4, 3)
+        else:
+            verts, inv = np.unique(q, return_inverse=True)
+            fq = support_normals(verts)[inv.reshape(q.shape)]
         self.q, self.n = q, n
         self.s = 1.0 / ld
         self.w = scale * ld
