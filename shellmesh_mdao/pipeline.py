@@ -410,7 +410,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     :data:`POOR_JACOBIAN` are repaired locally (:func:`~shellmesh_mdao.smooth.untangle` on the two
     rings around them; report key ``poor_repair``), and what remains is reported and logged."""
     from .mesh import vertex_faces
-    from .quad import subdivide_to_quads
+    from .quad import settle_off_surface, subdivide_to_quads
     from .smooth import SURFACE, _face_rings, smooth, untangle
 
     _need(state, "quad")
@@ -442,6 +442,10 @@ def stage_quad(state: PipelineState) -> PipelineState:
                     "iterations", "seconds", "factorisations", "n_step_halvings", "n_rejected", "n_fold_hits",
                     "n_jump_hits")})
             warp_term.update(applied=True, warp_p99_after=_warp_p99(q), vertices=int(len(movable)))
+    # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
+    # been smoothed most of them can go onto it (the same settle, no element below the guard
+    # made worse)
+    q, settled = settle_off_surface(q, sup, tol=OFF_SURFACE_TOL, guard_jacobian=o.guard_jacobian)
     sj = scaled_jacobian(q.points, q.faces)
     poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     repair = None
@@ -472,13 +476,16 @@ def stage_quad(state: PipelineState) -> PipelineState:
         log.warning("%d element(s) with scaled Jacobian <= %.1f (min %.3f) in %s: they come from sliver triangles "
                     "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
                     len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
-    # skin nodes off the input surface: the subdivision keeps a new node at its linear position
-    # where projecting it would fold a child and the repair around it failed (a parent face across
-    # a crease or a ridge much tighter than the element size)
+    # skin nodes still off the input surface: the subdivision kept a new node at its linear position
+    # where projecting it would fold a child, and neither its repair nor the one after the final
+    # smoothing (settle_off_surface) could fix that (a parent face across a crease or a ridge much
+    # tighter than the element size)
     skin_nodes = np.flatnonzero(sup.kind == SURFACE)
     d = sup.distance(q.points, skin_nodes) if len(skin_nodes) else np.zeros(0)
     off = d > OFF_SURFACE_TOL * q.diagonal
     st.report["off_surface"] = {"count": int(off.sum()), "max_distance": float(d.max(initial=0.0)),
+                                "before_settle": settled["before"],
+                                "settled": settled["before"] - settled["after"],
                                 "max_distance_over_size": float(d.max(initial=0.0) / state.size),
                                 "nodes": skin_nodes[off][:100].tolist()}
     if off.any():

@@ -36,7 +36,7 @@ from .mesh import ShellMesh, vertex_faces
 from .smooth import (CURVE, FIXED, SURFACE, Supports, _face_normals, _face_quality, _face_rings, _min_corner_sj,
                      untangle)
 
-__all__ = ["subdivide_to_quads", "subdivide_faces"]
+__all__ = ["subdivide_to_quads", "subdivide_faces", "settle_off_surface"]
 
 
 def _unit(a):
@@ -261,3 +261,64 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
         out = ShellMesh(pts, out.faces, out.component, out.component_names, out.fixed_vertices,
                         out.feature_edges, out.feature_edge_ids)
     return out, sup
+
+
+def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6, guard_jacobian: float = 0.2,
+                       iterations: int = 100, min_dot: float = 0.0) -> tuple[ShellMesh, dict]:
+    """Put the SURFACE nodes that lie farther than ``tol`` times the model's bounding-box
+    diagonal from their support back onto it, repairing the elements around them as the
+    subdivision's ``settle`` does (:func:`~shellmesh_mdao.smooth.untangle` on the two rings
+    around them up to ``guard_jacobian + 0.1``; an element the repair leaves at or below
+    ``guard_jacobian`` and worse than before gets its vertices' previous positions back).
+
+    Meant for the mesh after the final smoothing: a node the subdivision's fold guard kept at
+    its linear position (a parent face across a crease or a tip much tighter than itself) is
+    often free to go onto the surface once its neighbours have been smoothed. Each node is
+    projected to the closest point of the triangles facing the way of its vertex normal (the
+    plain closest point where there is none within reach). No element at or below
+    ``guard_jacobian`` gets worse.
+
+    Returns ``(mesh, info)`` with ``info`` = ``{"before", "after", "max_distance_before",
+    "max_distance_after"}`` (node counts and distances off the surface)."""
+    if not isinstance(mesh, ShellMesh):
+        raise MeshValidationError("settle_off_surface needs a ShellMesh; build one with ShellMesh(points, faces)")
+    if not isinstance(supports, Supports) or supports.n != mesh.n_points:
+        raise MeshValidationError("settle_off_surface needs Supports with one entry per mesh vertex: build them "
+                                  "with derive_supports(mesh, ...) for this mesh")
+    skin = np.flatnonzero(supports.kind == SURFACE)
+    d = supports.distance(mesh.points, skin) if len(skin) else np.zeros(0)
+    lim = tol * mesh.diagonal
+    off = skin[d > lim]
+    info = {"before": int(len(off)), "after": int(len(off)), "max_distance_before": float(d.max(initial=0.0)),
+            "max_distance_after": float(d.max(initial=0.0))}
+    if not len(off):
+        return mesh, info
+    pts = mesh.points
+    own = _face_normals(pts, mesh.faces, mesh.is_tri)
+    for facing in (True, False):
+        # first onto the triangles facing the node's way, then (the nodes still off) onto the plain
+        # closest point: _settle keeps every face's orientation, so a node that would land on the
+        # opposite skin of a thin tip is put back
+        if facing:
+            x, ok = supports.project(pts, off, normals=_vertex_normals(pts, mesh), min_dot=min_dot)
+            if (~ok).any():
+                x[~ok], _ = supports.project(pts, off[~ok])
+        else:
+            x, _ = supports.project(pts, off)
+        pts = _settle(ShellMesh(pts, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
+                                mesh.feature_edges, mesh.feature_edge_ids),
+                      supports, off, x, own, guard_jacobian, guard_jacobian + 0.1, iterations)
+        d2 = supports.distance(pts, off)
+        off = off[d2 > lim]
+        if not len(off):
+            break
+    out = ShellMesh(pts, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
+                    mesh.feature_edges, mesh.feature_edge_ids)
+    d2 = supports.distance(pts, skin)
+    info.update(after=int((d2 > lim).sum()), max_distance_after=float(d2.max(initial=0.0)))
+    return out, info
+
+
+def _vertex_normals(P, mesh: ShellMesh):
+    """Area-weighted vertex normals of ``mesh``'s faces at points ``P``."""
+    return ShellMesh(P, mesh.faces, mesh.component, list(mesh.component_names)).vertex_normals()

@@ -7,7 +7,7 @@ from shellmesh_mdao.errors import MeshValidationError
 from shellmesh_mdao.geometry import naca_wing
 from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.project import SurfaceLocator
-from shellmesh_mdao.quad import subdivide_to_quads
+from shellmesh_mdao.quad import settle_off_surface, subdivide_to_quads
 from shellmesh_mdao.quality import scaled_jacobian
 from shellmesh_mdao.smooth import (CURVE, FIXED, PLANE, SURFACE, Supports, derive_supports, mesh_figures,
                                    polylines_from_edges)
@@ -190,3 +190,39 @@ def test_guarded_nodes_settle_onto_a_rounded_edge_tighter_than_the_elements():
     assert ((out.face_normals() * parent_n).sum(1) > 0).all()
     again, _ = subdivide_to_quads(mesh, sup)
     assert np.array_equal(again.points, out.points)                        # deterministic
+
+
+def test_settle_off_surface_puts_nodes_left_off_the_input_back_onto_it():
+    """The pipeline's step after the final smoothing: the skin nodes a subdivision without
+    ``settle`` left inside the rounded edge (up to 0.01 off) go onto the input surface, the
+    elements around them are repaired along the surface (none flipped, none at or below the
+    guard), fixed nodes stay, the info counts them, and a mesh with every node on its support
+    comes back unchanged."""
+    Pf, Ff = _extrude(_stadium_section(0.03, np.linspace(0, 1, 41), 33), 80, -0.3, 1.5)
+    loc = SurfaceLocator(Pf, Ff[:, :3])
+    sec = _stadium_section(0.03, [0.0, 0.3, 0.6, 0.9], 2)
+    shift = np.where(np.arange(len(sec)) >= len(sec) // 2, -0.5, 0.0)
+    mesh = ShellMesh(*_extrude(sec, 6, 0.0, 1.2, shift))
+    sup = derive_supports(mesh, loc)
+    guarded, gs = subdivide_to_quads(mesh, sup, settle=False)
+    tol = 1e-6
+    skin = gs.kind == SURFACE
+    d0 = gs.distance(guarded.points)
+    n_off = int((d0[skin] > tol * guarded.diagonal).sum())
+    assert n_off >= 10 and d0.max() > 0.01
+    out, info = settle_off_surface(guarded, gs, tol=tol)
+    assert info["before"] == n_off and info["after"] == 0 and np.isclose(info["max_distance_before"], d0.max())
+    d = gs.distance(out.points)
+    assert d[skin].max() <= tol * out.diagonal and info["max_distance_after"] == d[skin].max()
+    assert loc.closest(out.points[skin])[2].max() <= tol * out.diagonal
+    assert np.array_equal(out.faces, guarded.faces) and out.check().ok
+    fixed = gs.kind == FIXED
+    assert fixed.any() and np.array_equal(out.points[fixed], guarded.points[fixed])
+    sj = scaled_jacobian(out.points, out.faces)
+    assert sj.min() > 0.2
+    parent_n = mesh.face_normals()[np.repeat(np.arange(mesh.n_faces), 3)]
+    assert ((out.face_normals() * parent_n).sum(1) > 0).all()                 # no child flipped
+    again, _ = settle_off_surface(guarded, gs, tol=tol)
+    assert np.array_equal(again.points, out.points)                           # deterministic
+    same, info2 = settle_off_surface(out, gs, tol=tol)
+    assert same is out and info2["before"] == info2["after"] == 0
