@@ -1349,7 +1349,8 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
        longest edge when the repair started, nor than 1.5 x the longer of the two edges it
        joins, so repeated repairs cannot open a gap in a chain), edge split (on the input
        surface, on the exact arc, on the input's sharp edge) and vertex relocation (on the
-       surface, along the arc, along the sharp edge), each followed by local flips, is kept
+       surface, along the arc -- within the same spacing bound -- along the sharp edge), each
+       followed by local flips, is kept
        when it improves the angles around it. Crossings, chain ends, chain/crease crossings
        and corners never move; every feature line is kept. At most ``max_repairs`` triangles
        are attempted, worst first (default ``32 + n_faces // 4000``): the repair is for the
@@ -2171,7 +2172,12 @@ class _SkinPatch:
                 d = np.where(np.abs(d) > 0.5 * cum[-1], d - np.sign(d) * cum[-1], d)
             sp = s[0] + (np.array([0.05, 0.1, 0.2, 0.3, 0.4, 0.5])[None] * d[:, None]).ravel()
             sp = np.mod(sp, cum[-1]) if arc.closed else np.clip(sp, 0.0, cum[-1])
-            return np.stack([np.interp(sp, cum, pts[:, j]) for j in range(3)], 1)
+            q = np.stack([np.interp(sp, cum, pts[:, j]) for j in range(3)], 1)
+            # the chain's spacing bound of collapse(): no chain edge at v longer than 1.3 x the chain's
+            # longest edge as imprinted (or than the longer of the two now, if that is already over)
+            lq = np.linalg.norm(q[:, None, :] - self.P[nbs][None], axis=2).max(1)
+            lim = max(self.chain_lmax[ci], float(np.linalg.norm(self.P[nbs] - x, axis=1).max()))
+            return q[lq <= lim]
         if k == _CREASE:
             ws = [w for w in nb.tolist() if self.feat(v, w) == -1]
             if len(ws) != 2 or self.on_crease(x)[1][0] > self.eps:
