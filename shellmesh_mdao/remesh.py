@@ -1922,6 +1922,9 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
     if len(_standing_faces(W, ctx)):
         _phase(_unstand_round, W, ctx, 10)
         _phase(_flip_round, W, ctx, 5, "angle")
+        # the collapses above check no angles: clean up the slivers they left
+        _phase(_cleanup_round, W, ctx, 3)
+        _phase(_flip_round, W, ctx, 5, "angle")
     # ---------------------------------------------------------------- output
     dm, dc, ctri, ok = _deviation(W, ctx)
     comp = surf.tri_comp[ctri]
