@@ -300,7 +300,7 @@ def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6
         # closest point: _settle keeps every face's orientation, so a node that would land on the
         # opposite skin of a thin tip is put back
         if facing:
-            x, ok = supports.project(pts, off, normals=_vertex_normals(pts, mesh), min_dot=min_dot)
+            x, ok = supports.project(pts, off, normals=mesh.vertex_normals(), min_dot=min_dot)
             if (~ok).any():
                 x[~ok], _ = supports.project(pts, off[~ok])
         else:
@@ -317,8 +317,3 @@ def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6
     d2 = supports.distance(pts, skin)
     info.update(after=int((d2 > lim).sum()), max_distance_after=float(d2.max(initial=0.0)))
     return out, info
-
-
-def _vertex_normals(P, mesh: ShellMesh):
-    """Area-weighted vertex normals of ``mesh``'s faces at points ``P``."""
-    return ShellMesh(P, mesh.faces, mesh.component, list(mesh.component_names)).vertex_normals()
