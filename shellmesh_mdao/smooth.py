@@ -911,7 +911,7 @@ class _Ortho:
         return (J.T @ J).tocsr()
 
 
-def _draped_vertices(P, faces, nrm, spread):
+def _draped_vertices(faces, nrm, spread):
     """(n,) bool: the vertices of the faces (quads and triangles) whose corners' support
     normals ``nrm`` (n, 3) are more than ``spread`` degrees apart; corners without a support
     normal (zero: fixed, on a curve) do not count."""
@@ -920,7 +920,7 @@ def _draped_vertices(P, faces, nrm, spread):
     on = np.einsum("mij,mij->mi", f, f) > 0.5
     c = np.einsum("mij,mkj->mik", f, f)
     cmin = np.where(on[:, :, None] & on[:, None, :], c, 1.0).min((1, 2))
-    out = np.zeros(len(P), bool)
+    out = np.zeros(len(nrm), bool)
     out[fv[cmin < np.cos(np.radians(spread))].ravel()] = True
     return out
 
@@ -961,7 +961,7 @@ class _Warp:
             used = np.unique(faces[faces >= 0])
             nrm = np.zeros((len(P), 3))
             nrm[used] = support_normals(used)
-            keep = ~_draped_vertices(P, faces, nrm, warp_spread)[q].any(1)
+            keep = ~_draped_vertices(faces, nrm, warp_spread)[q].any(1)
             q, n, ld = q[keep], n[keep], ld[keep]
             fq = nrm[q]                                                 # (m, 4, 3)
         else:
