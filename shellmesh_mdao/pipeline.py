@@ -101,6 +101,14 @@ class PipelineOptions:
     ``warp_from``         warp (degrees) above which a quad is in the planarity term; default 7.
     ``warp_goal``         warp p99 (degrees) the final smoothing's planarity term works towards;
                           default 10 (:data:`~shellmesh_mdao.quality.ACCEPTANCE`).
+    ``planar_offset``     after the final smoothing, the free skin nodes (not on chains, junctions,
+                          feature lines or members) around the quads still warped more than
+                          ``warp_goal`` degrees may move along their normal, off the input facets, by
+                          at most this fraction of ``size`` (and 0.15 of their local quad edge) to
+                          flatten those quads (:func:`~shellmesh_mdao.quad.planarize`; report key
+                          ``planarize``). 0.05 is the chordal deviation the remesh already accepts
+                          (``remesh_deviation`` 0.1 of the remesh edge, a quarter of it at the final
+                          quads). Default 0.05; 0 keeps every skin node on the input.
     """
 
     remesh: bool = True
@@ -122,6 +130,7 @@ class PipelineOptions:
     smooth_warp_spread: float = 75.0
     warp_from: float = 7.0
     warp_goal: float = 10.0
+    planar_offset: float = 0.05
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "PipelineOptions":
@@ -146,6 +155,10 @@ class PipelineOptions:
         if not out.get("snap", 0.0) < 0.5:
             raise ShellMeshError(f"solver option 'snap' must be below 0.5 (a fraction of a vertex's shortest "
                                  f"incident edge), got {out['snap']!r}")
+        if not out.get("planar_offset", 0.0) <= 0.25:
+            raise ShellMeshError(f"solver option 'planar_offset' must be at most 0.25 (a fraction of the size by "
+                                 f"which skin nodes may leave the input to flatten warped quads), got "
+                                 f"{out['planar_offset']!r}")
         if not 0 < out.get("smooth_warp_spread", 75.0) <= 180:
             raise ShellMeshError(f"solver option 'smooth_warp_spread' must be in (0, 180] degrees, got "
                                  f"{out['smooth_warp_spread']!r}")
@@ -410,7 +423,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     :data:`POOR_JACOBIAN` are repaired locally (:func:`~shellmesh_mdao.smooth.untangle` on the two
     rings around them; report key ``poor_repair``), and what remains is reported and logged."""
     from .mesh import vertex_faces
-    from .quad import settle_off_surface, subdivide_to_quads
+    from .quad import planarize, settle_off_surface, subdivide_to_quads
     from .smooth import SURFACE, _face_rings, smooth, untangle
 
     _need(state, "quad")
@@ -462,12 +475,44 @@ def stage_quad(state: PipelineState) -> PipelineState:
         if n2 <= len(poor) and (n2 < len(poor) or sj2.min() > sj.min()):
             q, sj = q2, sj2
             poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    # skin nodes still off the input surface: the subdivision kept a new node at its linear position
+    # where projecting it would fold a child, and neither its repair nor the one after the final
+    # smoothing (settle_off_surface) could fix that (a parent face across a crease or a ridge much
+    # tighter than the element size); measured before planarize, which moves nodes off on purpose
+    skin_nodes = np.flatnonzero(sup.kind == SURFACE)
+    d = sup.distance(q.points, skin_nodes) if len(skin_nodes) else np.zeros(0)
+    off = d > OFF_SURFACE_TOL * q.diagonal
+    off_surface = {"count": int(off.sum()), "max_distance": float(d.max(initial=0.0)),
+                   "before_settle": settled["before"], "settled": settled["before"] - settled["after"],
+                   "max_distance_over_size": float(d.max(initial=0.0) / state.size),
+                   "nodes": skin_nodes[off][:100].tolist()}
+    if off.any():
+        k = skin_nodes[off][np.argmax(d[off])]
+        log.warning("%d skin node(s) off the input surface, up to %.3g (%.2f element sizes) near %s: a face "
+                    "spanned a crease or ridge much tighter than the element size there; use a smaller --size "
+                    "or see the report's 'off_surface' (0-based ids)", int(off.sum()), float(d[off].max()),
+                    float(d[off].max() / state.size), np.array2string(q.points[k], precision=4))
+    # quads still warped above the goal straddle kinks of the faceted input that no move along it
+    # can flatten: their free skin nodes leave the facets by at most planar_offset * size
+    planar = None
+    if o.planar_offset > 0:
+        wq = warp(q.points, q.faces)
+        before = _warp_p99(q, wq)
+        q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
+                              guard_jacobian=POOR_JACOBIAN + 0.1)
+        planar.update(warp_p99_before=before, warp_p99_after=_warp_p99(q) if planar["applied"] else before,
+                      max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
+        if planar["applied"]:
+            sj = scaled_jacobian(q.points, q.faces)
+            poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     st = state.but(mesh=q, supports=sup, stage="quad")
     if o.final_iterations:
         st.report["final_smooth"] = _smooth_report(res)
         st.report["final_smooth"]["warp_term"] = warp_term
     if repair is not None:
         st.report["poor_repair"] = repair
+    st.report["off_surface"] = off_surface
+    st.report["planarize"] = planar
     st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),
                                   "folded": int((sj <= 0).sum()), "elements": poor[:100].tolist(),
                                   "min_scaled_jacobian": float(sj.min()) if len(sj) else None}
@@ -476,24 +521,6 @@ def stage_quad(state: PipelineState) -> PipelineState:
         log.warning("%d element(s) with scaled Jacobian <= %.1f (min %.3f) in %s: they come from sliver triangles "
                     "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
                     len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
-    # skin nodes still off the input surface: the subdivision kept a new node at its linear position
-    # where projecting it would fold a child, and neither its repair nor the one after the final
-    # smoothing (settle_off_surface) could fix that (a parent face across a crease or a ridge much
-    # tighter than the element size)
-    skin_nodes = np.flatnonzero(sup.kind == SURFACE)
-    d = sup.distance(q.points, skin_nodes) if len(skin_nodes) else np.zeros(0)
-    off = d > OFF_SURFACE_TOL * q.diagonal
-    st.report["off_surface"] = {"count": int(off.sum()), "max_distance": float(d.max(initial=0.0)),
-                                "before_settle": settled["before"],
-                                "settled": settled["before"] - settled["after"],
-                                "max_distance_over_size": float(d.max(initial=0.0) / state.size),
-                                "nodes": skin_nodes[off][:100].tolist()}
-    if off.any():
-        k = skin_nodes[off][np.argmax(d[off])]
-        log.warning("%d skin node(s) off the input surface, up to %.3g (%.2f element sizes) near %s: a face "
-                    "spanned a crease or ridge much tighter than the element size there; use a smaller --size "
-                    "or see the report's 'off_surface' (0-based ids)", int(off.sum()), float(d[off].max()),
-                    float(d[off].max() / state.size), np.array2string(q.points[k], precision=4))
     return st
 
 

@@ -30,13 +30,16 @@ falling back to the guarded positions only where that repair fails.
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
+from scipy.sparse import linalg as spla
 
 from .errors import MeshValidationError
 from .mesh import ShellMesh, vertex_faces
-from .smooth import (CURVE, FIXED, SURFACE, Supports, _face_normals, _face_quality, _face_rings, _min_corner_sj,
-                     untangle)
+from .quality import element_quality
+from .smooth import (CURVE, FIXED, SURFACE, Supports, _draped_vertices, _face_normals, _face_quality, _face_rings,
+                     _min_corner_sj, _support_normals, untangle)
 
-__all__ = ["subdivide_to_quads", "subdivide_faces", "settle_off_surface"]
+__all__ = ["subdivide_to_quads", "subdivide_faces", "settle_off_surface", "planarize"]
 
 
 def _unit(a):
@@ -316,4 +319,177 @@ def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6
                     mesh.feature_edges, mesh.feature_edge_ids)
     d2 = supports.distance(pts, skin)
     info.update(after=int((d2 > lim).sum()), max_distance_after=float(d2.max(initial=0.0)))
+    return out, info
+
+
+_TWIST = np.array([1.0, -1.0, 1.0, -1.0])
+
+
+def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50):
+    """``t`` minimising ``|A t - b|^2 + sum(reg t^2)`` with ``|t| <= bound``: the primal-dual
+    active-set method for box-constrained QPs (Hintermueller, Ito and Kunisch, SIAM J. Optim.
+    13, 2003), one sparse LU solve of the free unknowns per round, until the active sets repeat
+    (at most ``max_rounds`` rounds; the result is clipped to the box either way)."""
+    N = (A.T @ A + sparse.diags(reg)).tocsr()
+    r = A.T @ b
+    c = N.diagonal()
+    x = np.zeros(A.shape[1])
+    lam = np.zeros_like(x)
+    sets = None
+    for _ in range(max_rounds):
+        up = lam + c * (x - bound) > 0
+        lo = lam + c * (x + bound) < 0
+        if sets is not None and (up == sets[0]).all() and (lo == sets[1]).all():
+            break
+        sets = (up, lo)
+        free = ~(up | lo)
+        x = np.where(up, bound, np.where(lo, -bound, 0.0))
+        fi = np.flatnonzero(free)
+        if len(fi):
+            Nf = N[fi]
+            x[fi] = spla.spsolve(Nf[:, fi].tocsc(), r[fi] - Nf[:, ~free] @ x[~free])
+        lam = r - N @ x
+        lam[free] = 0.0
+    return np.clip(x, -bound, bound)
+
+
+def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_above: float = 10.0,
+              local_fraction: float = 0.15, guard_jacobian: float = 0.3, iterations: int = 6,
+              regularisation: float = 1e-3, rings: int = 2, aim: float | None = None, flat_angle: float = 0.5,
+              draped_angle: float = 60.0) -> tuple[ShellMesh, dict]:
+    """Flatten the skin quads warped more than ``warp_above`` degrees by moving SURFACE nodes
+    along their vertex normal, off the input facets by at most ``max_offset`` (a length) and at
+    most ``local_fraction`` times the mean edge of the quads around the node.
+
+    Sliding along the input cannot flatten a quad that straddles a kink of a faceted input
+    (docs/benchmarks.md); a small move off the facets can, as a pre-processor's warpage fix
+    does. The movable nodes are the SURFACE nodes (never chain, junction, feature or member
+    nodes, nor a node of an element at or below ``guard_jacobian``) within ``rings`` rings of
+    the warped quads; every quad at one of them has the residual ``(a - b + c - d) . n / D``
+    (its twist along its normal ``n`` over its mean diagonal ``D``: zero for a planar quad,
+    about its warp in radians otherwise). Each of ``iterations`` rounds re-linearises the
+    residuals at the current offsets, aims each quad warped more than ``aim`` degrees (default
+    0.6 ``warp_above``) at its residual scaled by ``aim`` / warp and every other quad at its
+    current residual, and solves for the offsets: the squared misses plus ``regularisation``
+    times the squared offsets over the local size, within the bounds (a box-constrained sparse
+    least-squares problem, solved by a primal-dual active set). Then no element whose scaled
+    Jacobian is at or below ``guard_jacobian`` gets worse, none above falls to it and none
+    turns over: the offsets of the nodes of such an element are halved (ten times, then
+    dropped). The result is kept only if fewer quads are warped above ``warp_above`` than
+    before. Same input, same offsets.
+
+    Returns ``(mesh, info)`` with ``info`` = ``{"applied", "nodes", "moved", "max_offset",
+    "quads_above_before", "quads_above_after", "halvings"}`` (``max_offset`` the largest
+    offset applied, a length)."""
+    if not isinstance(mesh, ShellMesh):
+        raise MeshValidationError("planarize needs a ShellMesh; build one with ShellMesh(points, faces)")
+    if not isinstance(supports, Supports) or supports.n != mesh.n_points:
+        raise MeshValidationError("planarize needs Supports with one entry per mesh vertex: build them "
+                                  "with derive_supports(mesh, ...) for this mesh")
+    for name, v in (("max_offset", max_offset), ("warp_above", warp_above), ("local_fraction", local_fraction),
+                    ("regularisation", regularisation), ("flat_angle", flat_angle), ("draped_angle", draped_angle)):
+        if not (np.isfinite(v) and v >= 0):
+            raise ValueError(f"planarize needs a finite {name} >= 0, got {v!r}")
+    aim = 0.6 * warp_above if aim is None else aim
+    if not (np.isfinite(aim) and aim >= 0):
+        raise ValueError(f"planarize needs a finite aim >= 0 (degrees), got {aim!r}")
+    if int(iterations) < 1 or int(rings) < 1:
+        raise ValueError(f"planarize needs iterations >= 1 and rings >= 1, got {iterations!r} and {rings!r}")
+    P, F = mesh.points, mesh.faces
+    quad = ~mesh.is_tri
+    q0 = element_quality(P, F)
+    w0 = q0["warp"]
+    warped = np.flatnonzero(quad & (w0 > warp_above))
+    info = {"applied": False, "nodes": 0, "moved": 0, "max_offset": 0.0, "quads_above_before": int(len(warped)),
+            "quads_above_after": int(len(warped)), "halvings": 0}
+    if not len(warped) or max_offset == 0 or local_fraction == 0:
+        return mesh, info
+    n = mesh.n_points
+    vptr, vface = vertex_faces(F, n)
+    region = _face_rings(F, vptr, vface, np.unique(F[warped][F[warped] >= 0]), rings)
+    cand = np.unique(F[region])
+    cand = cand[(cand >= 0)]
+    cand = cand[supports.kind[cand] == SURFACE]
+    # the nodes of elements at or below guard_jacobian stay on the input (the guard below would
+    # undo any move of theirs that lowers such an element further)
+    low = np.unique(F[q0["scaled_jacobian"] <= guard_jacobian])
+    cand = np.setdiff1d(cand, low[low >= 0])
+    # nodes stay on flat input: a node each of whose faces has its corners on input facets within
+    # flat_angle of one another (an end cap, a flat panel: a clamp or a symmetry plane may pick
+    # its nodes by coordinate), and a node of a face draped over an edge sharper than
+    # draped_angle (its corners' facets turned further apart: not a kink of a faceted curve)
+    if len(cand):
+        near = _face_rings(F, vptr, vface, cand, 1)
+        verts = np.unique(F[near])
+        verts = verts[verts >= 0]
+        nrm = np.zeros((n, 3))
+        nrm[verts] = _support_normals(supports, P, verts)
+        draped = _draped_vertices(F[near], nrm, draped_angle)
+        bent = _draped_vertices(F[near], nrm, flat_angle)
+        cand = cand[bent[cand] & ~draped[cand]]
+    rq = _face_rings(F, vptr, vface, cand, 1)
+    rq = rq[quad[rq]]
+    Q = F[rq, :4]
+    # local size: mean edge of the residual quads at each node
+    L = np.linalg.norm(P[Q] - P[np.roll(Q, -1, axis=1)], axis=2).mean(1)
+    hs = np.bincount(Q.ravel(), weights=np.repeat(L, 4), minlength=n)
+    hc = np.bincount(Q.ravel(), minlength=n)
+    cand = cand[hc[cand] > 0]
+    if not len(cand):
+        return mesh, info
+    h = hs[cand] / hc[cand]
+    bound = np.minimum(max_offset, local_fraction * h)
+    col = np.full(n, -1, np.int64)
+    col[cand] = np.arange(len(cand))
+    nu = mesh.vertex_normals()[cand]
+    D = 0.5 * (np.linalg.norm(P[Q[:, 2]] - P[Q[:, 0]], axis=1) + np.linalg.norm(P[Q[:, 3]] - P[Q[:, 1]], axis=1))
+    t = np.zeros(len(cand))
+    for _ in range(int(iterations)):
+        X = P.copy()
+        X[cand] += t[:, None] * nu
+        nq = _unit(np.cross(X[Q[:, 2]] - X[Q[:, 0]], X[Q[:, 3]] - X[Q[:, 1]]))
+        b = -np.einsum("ij,ij->i", np.einsum("k,ikj->ij", _TWIST, P[Q]), nq) / D
+        c = col[Q]
+        m = c >= 0
+        rows = np.broadcast_to(np.arange(len(Q))[:, None], Q.shape)[m]
+        vals = (_TWIST[None, :] * np.einsum("ikj,ij->ik", np.where(m[:, :, None], nu[np.where(m, c, 0)], 0.0),
+                                             nq) / D[:, None])[m]
+        A = sparse.csr_matrix((vals, (rows, c[m])), shape=(len(Q), len(cand)))
+        if aim > 0:
+            # aim each quad's residual at its own scaled by aim / warp when it is warped more:
+            # the quads already flatter than aim only hold on, the moves go where warp is
+            wc = element_quality(X, Q)["warp"]
+            b = b + (A @ t - b) * np.minimum(1.0, aim / np.maximum(wc, 1e-12))
+        t = _bounded_least_squares(A, b, regularisation / h ** 2, bound)
+    t[np.abs(t) <= 1e-9 * bound] = 0.0            # round-off of the solve: those nodes stay on the input
+    # guard: no element at or below guard_jacobian worse, none above falls to it, none turns over
+    faces_at = _face_rings(F, vptr, vface, cand, 1)
+    Fa = F[faces_at]
+    sj0 = q0["scaled_jacobian"][faces_at]
+    n0 = _face_normals(P, Fa, Fa[:, 3] < 0)
+    floor = np.minimum(sj0, guard_jacobian) - 1e-12
+    halvings = 0
+    for k in range(40):
+        X = P.copy()
+        X[cand] += t[:, None] * nu
+        sj = element_quality(X, Fa)["scaled_jacobian"]
+        flip = np.einsum("ij,ij->i", _face_normals(X, Fa, Fa[:, 3] < 0), n0) <= 0
+        bad = (sj < floor) | flip
+        if not bad.any():
+            break
+        v = np.unique(Fa[bad])
+        v = col[v[v >= 0]]
+        v = v[v >= 0]
+        t[v] = 0.0 if k >= 10 else 0.5 * t[v]
+        halvings += 1
+    else:
+        return mesh, info
+    w = element_quality(X, F[rq])["warp"]
+    above = int(len(warped)) - int((w0[rq] > warp_above).sum()) + int((w > warp_above).sum())
+    if above >= len(warped):
+        return mesh, info
+    out = ShellMesh(X, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
+                    mesh.feature_edges, mesh.feature_edge_ids)
+    info.update(applied=True, nodes=int(len(cand)), moved=int((t != 0).sum()), max_offset=float(np.abs(t).max()),
+                quads_above_after=above, halvings=halvings)
     return out, info

@@ -35,8 +35,15 @@ def test_straight_wing_seed58_tip_caps_on_surface(geometry_dir, manifest):
     check_guarantees(res)
     q, sup = res.mesh, res.state.supports
     d = sup.distance(q.points)[sup.kind == SURFACE]
-    # stricter than check_guarantees: EVERY skin node on the input surface
-    assert d.max() <= 1e-9 * q.diagonal, f"{int((d > 1e-9 * q.diagonal).sum())} skin nodes off (max {d.max():.3g})"
+    # stricter than check_guarantees: EVERY skin node on the input surface, but for those planarize
+    # moved along their normal (at most planar_offset * size; the nodes this test was written for
+    # were 0.31 sizes inside the wing)
+    moved = res.report["planarize"]["moved"] if res.report["planarize"] else 0
+    bound = res.state.options.planar_offset * case["size"]
+    tol = 1e-9 * q.diagonal
+    assert int((d > tol).sum()) <= moved and d.max() <= bound + tol, \
+        f"{int((d > tol).sum())} skin nodes off (max {d.max():.3g}), {moved} moved by planarize"
+    assert res.report["off_surface"]["count"] == 0
     # the tip-cap nodes are really on the caps (beyond the last rib, |y| near 2)
     tip = (np.abs(q.points[:, 1]) > 1.99) & (sup.kind == SURFACE)
     assert tip.sum() > 100
