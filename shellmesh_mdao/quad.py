@@ -365,7 +365,11 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     (docs/benchmarks.md); a small move off the facets can, as a pre-processor's warpage fix
     does. The movable nodes are the SURFACE nodes (never chain, junction, feature or member
     nodes, nor a node of an element at or below ``guard_jacobian``) within ``rings`` rings of
-    the warped quads; every quad at one of them has the residual ``(a - b + c - d) . n / D``
+    the warped quads, except where the input is flat around the node (each of its faces has its
+    corners on facets within ``flat_angle`` degrees of one another: an end cap or a flat panel,
+    whose nodes a clamp or a symmetry condition may pick by coordinate) and where one of its
+    faces is draped over an edge sharper than ``draped_angle`` (its corners' facets turned
+    further apart: not a kink of a faceted curve); every quad at one of them has the residual ``(a - b + c - d) . n / D``
     (its twist along its normal ``n`` over its mean diagonal ``D``: zero for a planar quad,
     about its warp in radians otherwise). Each of ``iterations`` rounds re-linearises the
     residuals at the current offsets, aims each quad warped more than ``aim`` degrees (default
