@@ -421,7 +421,10 @@ def stage_quad(state: PipelineState) -> PipelineState:
     """One subdivision to all quads (quad -> 4, triangle -> 3) over skin and members, new nodes
     projected onto their supports, then a final smoothing pass; elements still at or below
     :data:`POOR_JACOBIAN` are repaired locally (:func:`~shellmesh_mdao.smooth.untangle` on the two
-    rings around them; report key ``poor_repair``), and what remains is reported and logged."""
+    rings around them; report key ``poor_repair``), and what remains is reported and logged. Last,
+    the free skin nodes around the quads still warped above ``warp_goal`` move along their normals,
+    off the input by at most ``planar_offset`` times the size (:func:`~shellmesh_mdao.quad.planarize`;
+    report key ``planarize``)."""
     from .mesh import vertex_faces
     from .quad import planarize, settle_off_surface, subdivide_to_quads
     from .smooth import SURFACE, _face_rings, smooth, untangle
