@@ -499,12 +499,9 @@ def stage_quad(state: PipelineState) -> PipelineState:
     # can flatten: their free skin nodes leave the facets by at most planar_offset * size
     planar = None
     if o.planar_offset > 0:
-        wq = warp(q.points, q.faces)
-        before = _warp_p99(q, wq)
         q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
                               guard_jacobian=POOR_JACOBIAN + 0.1)
-        planar.update(warp_p99_before=before, warp_p99_after=_warp_p99(q) if planar["applied"] else before,
-                      max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
+        planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
         if planar["applied"]:
             sj = scaled_jacobian(q.points, q.faces)
             poor = np.flatnonzero(sj <= POOR_JACOBIAN)

@@ -34,7 +34,7 @@ from scipy import sparse
 from scipy.sparse import linalg as spla
 
 from .errors import MeshValidationError
-from .mesh import ShellMesh, vertex_faces
+from .mesh import ShellMesh, cross_rows, vertex_faces
 from .quality import element_quality
 from .smooth import (CURVE, FIXED, SURFACE, Supports, _draped_vertices, _face_normals, _face_quality, _face_rings,
                      _min_corner_sj, _support_normals, untangle)
@@ -369,9 +369,9 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     corners on facets within ``flat_angle`` degrees of one another: an end cap or a flat panel,
     whose nodes a clamp or a symmetry condition may pick by coordinate) and where one of its
     faces is draped over an edge sharper than ``draped_angle`` (its corners' facets turned
-    further apart: not a kink of a faceted curve); every quad at one of them has the residual ``(a - b + c - d) . n / D``
-    (its twist along its normal ``n`` over its mean diagonal ``D``: zero for a planar quad,
-    about its warp in radians otherwise). Each of ``iterations`` rounds re-linearises the
+    further apart: not a kink of a faceted curve); every quad at one of them has the residual
+    ``(a - b + c - d) . n / D`` (its twist along its normal ``n`` over its mean diagonal ``D``:
+    zero for a planar quad, about its warp in radians otherwise). Each of ``iterations`` rounds re-linearises the
     residuals at the current offsets, aims each quad warped more than ``aim`` degrees (default
     0.6 ``warp_above``) at its residual scaled by ``aim`` / warp and every other quad at its
     current residual, and solves for the offsets: the squared misses plus ``regularisation``
@@ -383,8 +383,9 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     before. Same input, same offsets.
 
     Returns ``(mesh, info)`` with ``info`` = ``{"applied", "nodes", "moved", "max_offset",
-    "quads_above_before", "quads_above_after", "halvings"}`` (``max_offset`` the largest
-    offset applied, a length)."""
+    "quads_above_before", "quads_above_after", "halvings", "warp_p99_before",
+    "warp_p99_after"}`` (``max_offset`` the largest offset applied, a length; the p99 over
+    the quads)."""
     if not isinstance(mesh, ShellMesh):
         raise MeshValidationError("planarize needs a ShellMesh; build one with ShellMesh(points, faces)")
     if not isinstance(supports, Supports) or supports.n != mesh.n_points:
@@ -404,8 +405,9 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     q0 = element_quality(P, F)
     w0 = q0["warp"]
     warped = np.flatnonzero(quad & (w0 > warp_above))
+    p99 = float(np.percentile(w0[quad], 99)) if quad.any() else 0.0
     info = {"applied": False, "nodes": 0, "moved": 0, "max_offset": 0.0, "quads_above_before": int(len(warped)),
-            "quads_above_after": int(len(warped)), "halvings": 0}
+            "quads_above_after": int(len(warped)), "halvings": 0, "warp_p99_before": p99, "warp_p99_after": p99}
     if not len(warped) or max_offset == 0 or local_fraction == 0:
         return mesh, info
     n = mesh.n_points
@@ -451,7 +453,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     for _ in range(int(iterations)):
         X = P.copy()
         X[cand] += t[:, None] * nu
-        nq = _unit(np.cross(X[Q[:, 2]] - X[Q[:, 0]], X[Q[:, 3]] - X[Q[:, 1]]))
+        nq = _unit(cross_rows(X[Q[:, 2]] - X[Q[:, 0]], X[Q[:, 3]] - X[Q[:, 1]]))
         b = -np.einsum("ij,ij->i", np.einsum("k,ikj->ij", _TWIST, P[Q]), nq) / D
         c = col[Q]
         m = c >= 0
@@ -488,12 +490,13 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
         halvings += 1
     else:
         return mesh, info
-    w = element_quality(X, F[rq])["warp"]
-    above = int(len(warped)) - int((w0[rq] > warp_above).sum()) + int((w > warp_above).sum())
+    w = w0.copy()
+    w[rq] = element_quality(X, F[rq])["warp"]            # no other face has a moved corner
+    above = int((quad & (w > warp_above)).sum())
     if above >= len(warped):
         return mesh, info
     out = ShellMesh(X, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
                     mesh.feature_edges, mesh.feature_edge_ids)
     info.update(applied=True, nodes=int(len(cand)), moved=int((t != 0).sum()), max_offset=float(np.abs(t).max()),
-                quads_above_after=above, halvings=halvings)
+                quads_above_after=above, halvings=halvings, warp_p99_after=float(np.percentile(w[quad], 99)))
     return out, info
