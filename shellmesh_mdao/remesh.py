@@ -78,9 +78,10 @@ def _independent(owner, res, rank, nres, max_sub=12):
     sel = np.zeros(ncand, bool)
     alive = np.ones(ncand, bool)
     taken = np.zeros(nres, bool)
+    o, r = owner, res                  # entries of the candidates still alive
     for _ in range(max_sub):
-        m = alive[owner]
-        o, r = owner[m], res[m]
+        m = alive[o]
+        o, r = o[m], r[m]
         if not len(o):
             break
         best = np.zeros(nres, np.int64)
@@ -90,8 +91,8 @@ def _independent(owner, res, rank, nres, max_sub=12):
         if not win.any():
             break
         sel |= win
-        taken[res[win[owner]]] = True
-        dead = np.bincount(owner, weights=taken[res], minlength=ncand) > 0
+        taken[r[win[o]]] = True
+        dead = np.bincount(o, weights=taken[r], minlength=ncand) > 0
         alive &= ~dead & ~win
         if not alive.any():
             break
@@ -1337,9 +1338,10 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
     rank = _rank(prio, cand)
     taken = np.zeros(n, bool)
     acc_a, acc_b = [], []
+    o, r = owner, x                    # lock-region entries of the candidates still alive
     for _ in range(16):
-        m = alive[owner]
-        o, r = owner[m], x[m]
+        m = alive[o]
+        o, r = o[m], r[m]
         if not len(o):
             break
         best = np.zeros(n, np.int64)
@@ -1360,9 +1362,9 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             acc_b.append(np.where(d == 0, v[win], u[win]))
             wmask = np.zeros(ncand, bool)
             wmask[win] = True
-            taken[x[wmask[owner]]] = True
+            taken[r[wmask[o]]] = True
             alive[win] = False
-            alive &= ~(np.bincount(owner, weights=taken[x], minlength=ncand) > 0)
+            alive &= ~(np.bincount(o, weights=taken[r], minlength=ncand) > 0)
         if not alive.any():
             break
     if not acc_a:

@@ -51,6 +51,7 @@ a thin trailing edge).
 """
 from __future__ import annotations
 
+import itertools
 import math
 import time
 import weakref
@@ -66,7 +67,7 @@ from .mesh import ShellMesh, cross_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
 
-__all__ = ["FIXED", "CURVE", "PLANE", "SURFACE", "KIND_NAMES", "Curve", "Supports", "derive_supports",
+__all__ = ["FIXED", "CURVE", "PLANE", "SURFACE", "KIND_NAMES", "Curve", "CurveSet", "Supports", "derive_supports",
            "polylines_from_edges", "smooth", "SmoothResult", "mesh_figures", "untangle",
            "AUTO_LU_MAX_UNKNOWNS"]
 
@@ -143,19 +144,83 @@ class Curve:
         if not len(q):
             return np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
         d0, _ = self._tree.query(q)
-        cand = self._tree.query_ball_point(q, d0 + 0.5 * self._L.max() * (1 + 1e-9) + 1e-300)
-        cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
+        cnt, si = _ball_lists(self._tree.query_ball_point(q, d0 + 0.5 * self._L.max() * (1 + 1e-9) + 1e-300))
         qi = np.repeat(np.arange(len(q)), cnt)
-        si = np.concatenate([np.asarray(c, np.int64) for c in cand])
-        a, ab = self._a[si], self._ab[si]
-        t = np.clip(_dot(q[qi] - a, ab) / (self._L[si] ** 2), 0.0, 1.0)
-        x = a + t[:, None] * ab
-        dist = _norm(x - q[qi])
-        order = np.lexsort((si, dist, qi))
-        first = np.ones(len(order), bool)
-        first[1:] = qi[order][1:] != qi[order][:-1]
-        pick = order[first]
-        return x[pick], dist[pick], ab[pick] / self._L[si[pick], None]
+        return _pick_nearest(q, qi, si, self._a, self._ab, self._L)
+
+
+def _pick_nearest(q, qi, si, a, ab, L):
+    """Closest point of each query ``q[qi]`` over its candidate segments ``si`` (the nearest,
+    then the lowest segment index): ``(points, distance, unit tangent)`` per distinct ``qi``
+    in increasing order."""
+    a, ab = a[si], ab[si]
+    t = np.clip(_dot(q[qi] - a, ab) / (L[si] ** 2), 0.0, 1.0)
+    x = a + t[:, None] * ab
+    dist = _norm(x - q[qi])
+    order = np.lexsort((si, dist, qi))
+    first = np.ones(len(order), bool)
+    first[1:] = qi[order][1:] != qi[order][:-1]
+    pick = order[first]
+    return x[pick], dist[pick], ab[pick] / L[si[pick], None]
+
+
+def _ball_lists(cand):
+    """Flatten the index lists of ``cKDTree.query_ball_point``: ``(counts, indices)``."""
+    cnt = np.fromiter(map(len, cand), np.int64, len(cand))
+    return cnt, np.fromiter(itertools.chain.from_iterable(cand), np.int64, int(cnt.sum()))
+
+
+class CurveSet:
+    """Closest points on many :class:`Curve` objects in one query: each query point names its
+    curve. Gives exactly what ``curves[c].closest`` gives, in one KD-tree query instead of one
+    per curve (the supports of a mesh hold hundreds of short chains, and the smoothing
+    projects onto them every step).
+
+    The tree holds every segment midpoint with a fourth coordinate ``c * sep``, ``sep`` far
+    larger than the curves' extent, so a query ``(x, c * sep)`` meets the segments of its own
+    curve at their plain distance; candidates of other curves are dropped, and a query whose
+    nearest midpoint is not on its own curve (one farther than ``sep`` from it) is answered by
+    its curve alone."""
+
+    def __init__(self, curves):
+        self.curves = list(curves)
+        self._tree = None
+
+    def _build(self):
+        cs = self.curves
+        self._cid = np.repeat(np.arange(len(cs)), [len(c._L) for c in cs])
+        self._a = np.concatenate([c._a for c in cs])
+        self._ab = np.concatenate([c._ab for c in cs])
+        self._L = np.concatenate([c._L for c in cs])
+        self._Lmax = np.array([c._L.max() for c in cs])
+        mid = self._a + 0.5 * self._ab
+        self._sep = 1e3 * (float(np.abs(mid).max()) + float(self._L.max()) + 1.0)
+        self._tree = cKDTree(np.column_stack([mid, self._cid * self._sep]))
+
+    def closest(self, q, cid):
+        """``(points, distance, unit tangent)`` of each query ``q`` (k, 3) on curve ``cid`` (k,)."""
+        q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, 3))
+        cid = np.asarray(cid, np.int64).reshape(-1)
+        k = len(q)
+        if not k:
+            return np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
+        if self._tree is None:
+            self._build()
+        q4 = np.column_stack([q, cid * self._sep])
+        d0, i0 = self._tree.query(q4)
+        own = self._cid[i0] == cid
+        X, D, T = np.zeros((k, 3)), np.zeros(k), np.zeros((k, 3))
+        if own.any():
+            rows = np.flatnonzero(own)
+            radius = d0[rows] + 0.5 * self._Lmax[cid[rows]] * (1 + 1e-9) + 1e-300
+            cnt, si = _ball_lists(self._tree.query_ball_point(q4[rows], radius))
+            qi = np.repeat(np.arange(len(rows)), cnt)
+            keep = self._cid[si] == cid[rows][qi]
+            X[rows], D[rows], T[rows] = _pick_nearest(q[rows], qi[keep], si[keep], self._a, self._ab, self._L)
+        for c in np.unique(cid[~own]).tolist():
+            rows = np.flatnonzero(~own & (cid == c))
+            X[rows], D[rows], T[rows] = self.curves[c].closest(q[rows])
+        return X, D, T
 
 
 class _Surface:
@@ -247,6 +312,7 @@ class Supports:
         self.edge_curve = np.asarray(self.edge_curve, np.int64).reshape(-1)
         self._surf = [s if isinstance(s, _Surface) else _Surface(s) for s in self.surfaces]
         self.surfaces = [s.loc for s in self._surf]
+        self._curve_set = None
         if len(self.kind) != len(self.ref):
             raise MeshValidationError("Supports: kind and ref must have one entry per vertex")
         for k, lst in ((CURVE, self.curves), (PLANE, self.planes), (SURFACE, self.surfaces)):
@@ -259,6 +325,19 @@ class Supports:
     def n(self) -> int:
         return len(self.kind)
 
+    @property
+    def curve_set(self) -> CurveSet:
+        """All ``curves`` in one :class:`CurveSet` (built on first use, shared by copies)."""
+        if self._curve_set is None:
+            self._curve_set = CurveSet(self.curves)
+        return self._curve_set
+
+    def _copy_with(self, kind, ref) -> "Supports":
+        out = Supports(kind, ref, self._surf, self.planes, self.curves, self.comp_kind, self.comp_ref,
+                       self.edge_pairs, self.edge_curve)
+        out._curve_set = self.curve_set if self.curves else None
+        return out
+
     def counts(self) -> dict:
         """Number of vertices of each kind."""
         c = np.bincount(self.kind, minlength=4)
@@ -270,17 +349,15 @@ class Supports:
 
     def extended(self, kind, ref) -> "Supports":
         """Copy with vertices appended (same surfaces, planes, curves)."""
-        return Supports(np.concatenate([self.kind, np.asarray(kind, np.int8)]),
-                        np.concatenate([self.ref, np.asarray(ref, np.int64)]), self._surf, self.planes,
-                        self.curves, self.comp_kind, self.comp_ref, self.edge_pairs, self.edge_curve)
+        return self._copy_with(np.concatenate([self.kind, np.asarray(kind, np.int8)]),
+                               np.concatenate([self.ref, np.asarray(ref, np.int64)]))
 
     def held(self, movable) -> "Supports":
         """Copy in which every vertex not in ``movable`` (ids) is FIXED (same surfaces,
         planes, curves)."""
         keep = np.zeros(self.n, bool)
         keep[np.asarray(movable, np.int64).reshape(-1)] = True
-        return Supports(np.where(keep, self.kind, FIXED), np.where(keep, self.ref, -1), self._surf, self.planes,
-                        self.curves, self.comp_kind, self.comp_ref, self.edge_pairs, self.edge_curve)
+        return self._copy_with(np.where(keep, self.kind, FIXED), np.where(keep, self.ref, -1))
 
     def curve_of_edges(self, pairs) -> np.ndarray:
         """Curve id of each node pair (-1 where the pair is not a feature edge with a curve)."""
@@ -314,17 +391,14 @@ class Supports:
             p0 = self.planes[ref[pl], 0]
             nn = self.planes[ref[pl], 1]
             out[pl] = x[pl] - _dot(x[pl] - p0, nn)[:, None] * nn
-        for k, members in ((CURVE, self.curves), (SURFACE, self._surf)):
-            sel = np.flatnonzero(kind == k)
-            if not len(sel):
-                continue
-            for r in np.unique(ref[sel]).tolist():        # one call per curve / surface
-                rows = sel[ref[sel] == r]
-                if k == CURVE:
-                    out[rows] = members[r].closest(x[rows])[0]
-                else:
-                    nrm = None if normals is None else np.asarray(normals, np.float64)[rows]
-                    out[rows], ok[rows] = members[r].project(x[rows], nrm, min_dot)
+        cv = np.flatnonzero(kind == CURVE)
+        if len(cv):                                       # every curve in one query
+            out[cv] = self.curve_set.closest(x[cv], ref[cv])[0]
+        sel = np.flatnonzero(kind == SURFACE)
+        for r in np.unique(ref[sel]).tolist():            # one call per surface
+            rows = sel[ref[sel] == r]
+            nrm = None if normals is None else np.asarray(normals, np.float64)[rows]
+            out[rows], ok[rows] = self._surf[r].project(x[rows], nrm, min_dot)
         return out, ok
 
     def project(self, points, idx=None, normals=None, min_dot: float = 0.0):
@@ -491,13 +565,19 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
     eps = tol * max(mesh.diagonal, 1e-300)
     best = np.full(len(fe), np.inf)
     P = mesh.points
-    for ci, c in enumerate(curve_list):
-        sel = np.flatnonzero(fid == curve_fid[ci])
+    # distances of each feature edge's ends from every curve of its feature, in one query
+    sels = [np.flatnonzero(fid == curve_fid[ci]) for ci in range(len(curve_list))]
+    cset = CurveSet(curve_list)
+    nq = np.array([len(x) for x in sels], np.int64)
+    qsel = np.concatenate(sels) if sels else np.zeros(0, np.int64)
+    qcid = np.repeat(np.arange(len(curve_list)), nq)
+    dq = np.maximum(cset.closest(P[fe[qsel, 0]], qcid)[1], cset.closest(P[fe[qsel, 1]], qcid)[1])
+    qstart = np.concatenate([[0], np.cumsum(nq)])
+    for ci in range(len(curve_list)):
+        sel = sels[ci]
         if not len(sel):
             continue
-        d0 = c.closest(P[fe[sel, 0]])[1]
-        d1 = c.closest(P[fe[sel, 1]])[1]
-        d = np.maximum(d0, d1)
+        d = dq[qstart[ci]:qstart[ci + 1]]
         # a later curve takes an edge only if it is closer by more than eps: an edge on two
         # curves (a member chain lies on the member plane's exact section AND on the polyline
         # of its own feature edges) goes to the first one whatever the rounding, so the
@@ -549,7 +629,9 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
     unused[mesh.faces[mesh.faces >= 0]] = False
     kind[unused] = FIXED
     ref[unused] = -1
-    return Supports(kind, ref, surfaces, parr, curve_list, comp_kind, comp_ref, fe.copy(), edge_curve)
+    out = Supports(kind, ref, surfaces, parr, curve_list, comp_kind, comp_ref, fe.copy(), edge_curve)
+    out._curve_set = cset
+    return out
 
 
 # ============================================================================ element checks
@@ -670,9 +752,8 @@ def _frames(mesh: ShellMesh, P, supports: Supports, vnormal):
         # fall back on the polyline direction where the chord is missing or degenerate
         miss = _norm(tang) == 0
         if miss.any():
-            for r in np.unique(ref[cv[miss]]).tolist():
-                rows = np.flatnonzero(miss & (ref[cv] == r))
-                tang[rows] = supports.curves[r].closest(P[cv[rows]])[2]
+            rows = np.flatnonzero(miss)
+            tang[rows] = supports.curve_set.closest(P[cv[rows]], ref[cv[rows]])[2]
         # make the sign deterministic w.r.t. the chord order (b[s] -> b[s+1]) only
         cols_v.append(cv)
         cols_t.append(tang)
@@ -1278,9 +1359,8 @@ def _tangent_dirs(supports: Supports, P, verts, nrm, ndir: int):
     t1, t2 = _onb(_unit(nn))
     cv = np.flatnonzero(kind == CURVE)
     t2[cv] = 0.0
-    for r in np.unique(ref[cv]).tolist():                  # one call per curve
-        rows = cv[ref[cv] == r]
-        t1[rows] = supports.curves[r].closest(P[verts[rows]])[2]
+    if len(cv):
+        t1[cv] = supports.curve_set.closest(P[verts[cv]], ref[cv])[2]
     th = 2.0 * np.pi * np.arange(ndir) / ndir
     d = np.cos(th)[None, :, None] * t1[:, None, :] + np.sin(th)[None, :, None] * t2[:, None, :]
     d[cv] = np.where(np.cos(th) >= 0, 1.0, -1.0)[None, :, None] * t1[cv][:, None, :]

@@ -13,7 +13,7 @@ from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.project import SurfaceLocator
 from shellmesh_mdao.quad import subdivide_to_quads
 from shellmesh_mdao.quality import scaled_jacobian
-from shellmesh_mdao.smooth import (CURVE, FIXED, PLANE, SURFACE, Curve, Supports, derive_supports,
+from shellmesh_mdao.smooth import (CURVE, FIXED, PLANE, SURFACE, Curve, CurveSet, Supports, derive_supports,
                                    polylines_from_edges, smooth)
 
 
@@ -206,6 +206,34 @@ def test_curve_and_polylines():
     pl = polylines_from_edges(np.zeros((8, 3)), edges)
     got = sorted((tuple(ix.tolist()), cl) for ix, cl in pl)
     assert got == [((0, 1, 2), False), ((2, 3), False), ((2, 4), False), ((5, 6, 7), True)]
+
+
+def test_curve_set_matches_each_curve_bit_for_bit():
+    """CurveSet answers every curve in one query and must give exactly what each Curve gives on
+    its own (the smoothing's projections and so the meshes depend on it): crossing and
+    touching curves (a query near another curve must still land on its own), a closed one,
+    collinear segments (ties: the lowest segment wins), and queries far beyond the set's
+    extent (answered curve by curve)."""
+    rng = np.random.default_rng(7)
+    s = np.linspace(0.0, 2.0, 41)
+    curves = [Curve(np.c_[s, np.zeros_like(s), np.zeros_like(s)]),           # x axis
+              Curve(np.c_[np.ones_like(s), s - 1.0, np.zeros_like(s)]),       # crosses it at x = 1
+              Curve(np.c_[np.cos(3 * s), np.sin(3 * s), 0.01 * s], closed=True),
+              Curve(np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0.5], [0, 0, 0.5]], float))]  # overlaps the x axis
+    cs = CurveSet(curves)
+    m = 600
+    cid = rng.integers(0, len(curves), m)
+    q = rng.uniform(-1.5, 2.5, (m, 3)) * [1, 1, 0.3]
+    q[:40] = np.array([1.0, 0.0, 0.0]) + rng.normal(scale=1e-3, size=(40, 3))   # at the crossing
+    q[40:45] *= 1e9                                                              # far away
+    x, d, t = cs.closest(q, cid)
+    for i in range(m):
+        xi, di, ti = curves[cid[i]].closest(q[i:i + 1])
+        assert np.array_equal(x[i], xi[0]) and d[i] == di[0] and np.array_equal(t[i], ti[0]), i
+    # its own curve, not the nearest one: on the x axis at (0.5, 0.2, 0), curve 1 (x = 1) is 0.5 away
+    x, d, _ = cs.closest(np.array([[0.5, 0.2, 0.0]]), np.array([1]))
+    assert np.allclose(x, [[1.0, 0.2, 0.0]]) and np.isclose(d[0], 0.5)
+    assert [len(a) for a in cs.closest(np.zeros((0, 3)), np.zeros(0, np.int64))] == [0, 0, 0]
 
 
 def test_section_polylines_cached_per_locator_and_plane():
