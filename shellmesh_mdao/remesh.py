@@ -86,13 +86,15 @@ def _independent(owner, res, rank, nres, max_sub=12):
             break
         best = np.zeros(nres, np.int64)
         np.maximum.at(best, r, rank[o])
-        lose = np.bincount(o, weights=(best[r] != rank[o]), minlength=ncand) > 0
+        lose = np.zeros(ncand, bool)
+        lose[o[best[r] != rank[o]]] = True
         win = alive & ~lose
         if not win.any():
             break
         sel |= win
         taken[r[win[o]]] = True
-        dead = np.bincount(o, weights=taken[r], minlength=ncand) > 0
+        dead = np.zeros(ncand, bool)
+        dead[o[taken[r]]] = True
         alive &= ~dead & ~win
         if not alive.any():
             break
@@ -1293,6 +1295,14 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         rmax = np.zeros(k)
         np.maximum.at(rmax, ow, r)
         okd &= rmax <= max_len_ratio
+        if not okd.all():
+            # the costly tests below only for the pairs still allowed (the others get inf
+            # whatever they find); each pair's answer does not depend on the others in the batch
+            out = np.full(k, np.inf)
+            keep = np.flatnonzero(okd)
+            if len(keep):
+                out[keep] = geometric(a[keep], b[keep], okd[keep])
+            return out
         ow, pos = _expand(fptr, a)
         ff = vf[pos]
         Fa = F[ff]
@@ -1346,7 +1356,8 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             break
         best = np.zeros(n, np.int64)
         np.maximum.at(best, r, rank[o])
-        lose = np.bincount(o, weights=(best[r] != rank[o]), minlength=ncand) > 0
+        lose = np.zeros(ncand, bool)
+        lose[o[best[r] != rank[o]]] = True
         win = np.flatnonzero(alive & ~lose)
         if not len(win):
             break
@@ -1364,7 +1375,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             wmask[win] = True
             taken[r[wmask[o]]] = True
             alive[win] = False
-            alive &= ~(np.bincount(o, weights=taken[r], minlength=ncand) > 0)
+            alive[o[taken[r]]] = False
         if not alive.any():
             break
     if not acc_a:
@@ -1407,20 +1418,6 @@ def _flip_round(W, ctx, mode):
     c = F[f0, (s0 + 2) % 3]
     d = F[f1, (s1 + 2) % 3]
     ok = (c != d) & (T.lookup(c, d) < 0) & (W.fpatch[f0] == W.fpatch[f1])
-    Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
-    n0 = _unit(cross_rows(Pb - Pa, Pc - Pa))
-    n1 = _unit(cross_rows(Pa - Pb, Pd - Pb))
-    cosmax = np.cos(np.radians(ctx.max_flip_dihedral))
-    ok &= _dot(n0, n1) > cosmax
-    m0 = _unit(cross_rows(Pd - Pa, Pc - Pa))
-    m1 = _unit(cross_rows(Pb - Pd, Pc - Pd))
-    # the new pair must not fold over the old one (both new faces turn by less than the
-    # allowed dihedral from both old faces)
-    for mm in (m0, m1):
-        ok &= (_dot(mm, n0) > cosmax) & (_dot(mm, n1) > cosmax)
-    ok &= _facing_ok(W, ctx, np.stack([a, d, c], 1), m0) & _facing_ok(W, ctx, np.stack([d, b, c], 1), m1)
-    old = np.minimum(_tri_min_angle(Pa, Pb, Pc), _tri_min_angle(Pb, Pa, Pd))
-    new = np.minimum(_tri_min_angle(Pa, Pd, Pc), _tri_min_angle(Pd, Pb, Pc))
     if mode == "valence":
         nptr, _ = T.vertex_neighbors()
         deg = np.diff(nptr).astype(np.float64)
@@ -1439,7 +1436,32 @@ def _flip_round(W, ctx, mode):
         before = en(a, 0) + en(b, 0) + en(c, 0) + en(d, 0)
         after = en(a, -1) + en(b, -1) + en(c, 1) + en(d, 1)
         gain = before - after
-        ok &= (gain > 0) & (new >= 0.5 * old)
+        ok &= gain > 0
+    # the geometric tests only for the flips the topological ones allow (each flip's answer
+    # does not depend on the others)
+    keep = np.flatnonzero(ok)
+    cand, a, b, c, d, f0, f1, ok = cand[keep], a[keep], b[keep], c[keep], d[keep], f0[keep], f1[keep], ok[keep]
+    Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
+    n0 = _unit(cross_rows(Pb - Pa, Pc - Pa))
+    n1 = _unit(cross_rows(Pa - Pb, Pd - Pb))
+    cosmax = np.cos(np.radians(ctx.max_flip_dihedral))
+    ok &= _dot(n0, n1) > cosmax
+    m0 = _unit(cross_rows(Pd - Pa, Pc - Pa))
+    m1 = _unit(cross_rows(Pb - Pd, Pc - Pd))
+    # the new pair must not fold over the old one (both new faces turn by less than the
+    # allowed dihedral from both old faces)
+    for mm in (m0, m1):
+        ok &= (_dot(mm, n0) > cosmax) & (_dot(mm, n1) > cosmax)
+    ok &= _facing_ok(W, ctx, np.stack([a, d, c], 1), m0) & _facing_ok(W, ctx, np.stack([d, b, c], 1), m1)
+    k2 = np.flatnonzero(ok)                  # and the angles only for the flips still allowed
+    cand, a, b, c, d, f0, f1 = (x[k2] for x in (cand, a, b, c, d, f0, f1))
+    Pa, Pb, Pc, Pd, m0, m1 = (x[k2] for x in (Pa, Pb, Pc, Pd, m0, m1))
+    keep, ok = keep[k2], ok[k2]
+    old = np.minimum(_tri_min_angle(Pa, Pb, Pc), _tri_min_angle(Pb, Pa, Pd))
+    new = np.minimum(_tri_min_angle(Pa, Pd, Pc), _tri_min_angle(Pd, Pb, Pc))
+    if mode == "valence":
+        gain = gain[keep]
+        ok &= new >= 0.5 * old
         prio = gain + 1e-3 * (new - old)
     else:
         gain = new - old
