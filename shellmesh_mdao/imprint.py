@@ -1176,7 +1176,15 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     p, q, r, s, f0, f1, ek = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok], ek[ok]
     n0 = cross_rows(P[q] - P[p], P[r] - P[p])
     n1 = cross_rows(P[p] - P[q], P[s] - P[q])
-    old_min = np.minimum(_tri_angles_min(P, np.stack([p, q, r], 1)), _tri_angles_min(P, np.stack([q, p, s], 1)))
+    cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1), 1e-300)
+    new_key = np.minimum(r, s) * n + np.maximum(r, s)
+    # the angle tests only for the pairs the dihedral and new-edge tests allow (each pair's
+    # answer does not depend on the others)
+    pre = np.flatnonzero((cosd > np.cos(np.radians(max_dihedral))) & ~np.isin(new_key, uk))
+    p, q, r, s, f0, f1, ek, n0, n1, new_key = (x[pre] for x in (p, q, r, s, f0, f1, ek, n0, n1, new_key))
+    # (p, q, r) and (q, p, s) are the triangles f0 and f1 themselves, rotated: the same angles
+    tmin = _tri_angles_min(P, T)
+    old_min = np.minimum(tmin[f0], tmin[f1])
     t0 = np.stack([r, s, q], 1)
     t1 = np.stack([s, r, p], 1)
     new_min = np.minimum(_tri_angles_min(P, t0), _tri_angles_min(P, t1))
@@ -1184,8 +1192,7 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     nn1 = cross_rows(P[t1[:, 1]] - P[t1[:, 0]], P[t1[:, 2]] - P[t1[:, 0]])
     navg = n0 / np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-300) + \
         n1 / np.maximum(np.linalg.norm(n1, axis=1, keepdims=True), 1e-300)
-    cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1), 1e-300)
-    good = (new_min > old_min + min_gain) & (cosd > np.cos(np.radians(max_dihedral)))
+    good = new_min > old_min + min_gain
     # both new triangles keep the pair's orientation and stay within max_dihedral of its mean
     # normal: a thin new triangle spanning a bend (three close vertices of one chain around a
     # rounded leading edge) would lie in the member plane, across the skin
@@ -1193,8 +1200,6 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     un = navg / np.maximum(np.linalg.norm(navg, axis=1, keepdims=True), 1e-300)
     good &= np.einsum("ij,ij->i", nn0, un) > cmax * np.linalg.norm(nn0, axis=1)
     good &= np.einsum("ij,ij->i", nn1, un) > cmax * np.linalg.norm(nn1, axis=1)
-    new_key = np.minimum(r, s) * n + np.maximum(r, s)
-    good &= ~np.isin(new_key, uk)
     cand = np.flatnonzero(good)
     if not len(cand):
         return T, 0
@@ -1277,7 +1282,7 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     pc = np.where(which[:, 2, None], new[rows], P[Tm[:, 2]])
     Pn = np.stack([pa, pb, pc], 1)
     ang_new = _angles3(Pn)
-    ang_old = _tri_angles_min(P, Tm)
+    ang_old = _tri_angles_min(P, T)[tris]                   # Tm = T[tris]: the same triangles
     nn = cross_rows(pb - pa, pc - pa)
     flip = np.einsum("ij,ij->i", nn, nrm[tris]) <= 0
     worst_new = np.full(n, np.inf)
