@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .mesh import ShellMesh, cross_rows, vertex_faces
+from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .section import Plane, SectionArc, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain",
@@ -126,8 +126,8 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
     f = int(cand[j])
     w = bary[j]
     tri = T[f]
-    L = np.mean(np.linalg.norm(P[tri] - P[np.roll(tri, -1)], axis=1))
-    dv = np.linalg.norm(P[tri] - x, axis=1)
+    L = np.mean(norm_rows(P[tri] - P[np.roll(tri, -1)], axis=1))
+    dv = norm_rows(P[tri] - x, axis=1)
     order = np.argsort(dv, kind="stable")
     for i in order:
         if dv[i] <= snap * L and movable[tri[i]] and _snap_keeps_star(P, T, int(tri[i]), x):
@@ -194,7 +194,7 @@ def _point_tri(p, a, b, c):
             se = e - s
             L2 = np.einsum("ij,ij->i", se, se)
             t = np.clip(np.einsum("ij,ij->i", p - s, se) / np.where(L2 > 0, L2, 1), 0, 1)
-            dd = np.linalg.norm(s + t[:, None] * se - p, axis=1)
+            dd = norm_rows(s + t[:, None] * se - p, axis=1)
             better = dd < best
             best = np.where(better, dd, best)
             nb = np.zeros((len(t), 3))
@@ -203,7 +203,7 @@ def _point_tri(p, a, b, c):
             bb = np.where(better[:, None], nb, bb)
         bary[out] = bb
     x = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
-    return bary, np.linalg.norm(x - p, axis=1)
+    return bary, norm_rows(x - p, axis=1)
 
 
 def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, arc: SectionArc,
@@ -239,7 +239,7 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     # local edge length per vertex of the region: its shortest incident region edge
     rt = T[region]
     rb = np.roll(rt, -1, axis=1)
-    el = np.linalg.norm(P[rt] - P[rb], axis=2).ravel()
+    el = norm_rows(P[rt] - P[rb], axis=2).ravel()
     vmin = np.full(len(P), np.inf)
     np.minimum.at(vmin, rt.ravel(), el)
     np.minimum.at(vmin, rb.ravel(), el)
@@ -372,7 +372,7 @@ def _polyline_param(q, poly, cum):
         qq = q[s:s + 256]
         t = np.clip(np.einsum("qij,ij->qi", qq[:, None, :] - a[None], ab) / np.where(L2 > 0, L2, 1), 0, 1)
         x = a[None] + t[..., None] * ab[None]
-        dist = np.linalg.norm(x - qq[:, None, :], axis=2)
+        dist = norm_rows(x - qq[:, None, :], axis=2)
         j = np.argmin(dist, axis=1)
         out[s:s + 256] = cum[j] + t[np.arange(len(qq)), j] * np.sqrt(L2[j])
     return out
@@ -564,7 +564,7 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             on[xs] = True
             # crossing vertices lying on this chain's own arc: the chain must pass through them
             if len(xs):
-                dx = np.linalg.norm(closest_on_polyline(P[xs], arc.points, arc.closed) - P[xs], axis=1)
+                dx = norm_rows(closest_on_polyline(P[xs], arc.points, arc.closed) - P[xs], axis=1)
                 must = xs[dx <= 1e3 * eps]
         movable = ~(fixed | feat_v)
         endv = None
@@ -659,7 +659,7 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
             if c.arc is None or c.arc.closed or len(c.vertices) < 2:
                 continue
             A = c.arc.points
-            cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(A, axis=0), axis=1))])
+            cum = np.concatenate([[0.0], np.cumsum(norm_rows(np.diff(A, axis=0), axis=1))])
             v = np.asarray(c.vertices, np.int64)
             sv = _polyline_param(P[v], A, cum)
             rev = sv[-1] < sv[0]
@@ -674,7 +674,7 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
             a, b = P[v[k[j]]], P[v[k[j] + 1]]
             ab = b - a
             t = np.clip(np.einsum("ij,ij->i", A[j] - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0, 1)
-            d = np.linalg.norm(a + t[:, None] * ab - A[j], axis=1)
+            d = norm_rows(a + t[:, None] * ab - A[j], axis=1)
             o = np.lexsort((-d, k[j]))
             first = np.ones(len(o), bool)
             first[1:] = k[j][o][1:] != k[j][o][:-1]
@@ -773,8 +773,8 @@ def _flip_bridges(P, T, C, bridges, on, fe, locator, near: float = 0.25, min_ang
     w1 = T[t1, (h1 % 3 + 2) % 3]
     ok &= (C[t0] == C[t1]) & (t0 != t1) & (w0 != w1)
     mid = locator.closest(0.5 * (P[u] + P[v]))[0]
-    L = np.linalg.norm(P[v] - P[u], axis=1)
-    dw = np.minimum(np.linalg.norm(mid - P[w0], axis=1), np.linalg.norm(mid - P[w1], axis=1))
+    L = norm_rows(P[v] - P[u], axis=1)
+    dw = np.minimum(norm_rows(mid - P[w0], axis=1), norm_rows(mid - P[w1], axis=1))
     ok &= dw < near * L
     ok &= ~(on[w0] & on[w1]).any(1)                             # the new edge is no bridge
     ok &= ~_has_edge(_edge_keys(T, n), w0, w1, n)
@@ -824,7 +824,7 @@ def _segment_hits(q, a, b, eps):
     """Every (point, segment) pair with point ``q[i]`` within ``eps`` of segment ``a[j]-b[j]``:
     ``(i, j, t)`` with ``t`` the parameter of the closest point along the segment."""
     tree = cKDTree(0.5 * (a + b))
-    reach = 0.5 * np.linalg.norm(b - a, axis=1).max() + eps
+    reach = 0.5 * norm_rows(b - a, axis=1).max() + eps
     cand = tree.query_ball_point(q, reach)
     cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
     if not cnt.sum():
@@ -834,7 +834,7 @@ def _segment_hits(q, a, b, eps):
     ab = b[si] - a[si]
     L2 = np.einsum("ij,ij->i", ab, ab)
     t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab) / np.where(L2 > 0, L2, 1.0), 0, 1)
-    d = np.linalg.norm(a[si] + t[:, None] * ab - q[qi], axis=1)
+    d = norm_rows(a[si] + t[:, None] * ab - q[qi], axis=1)
     ok = d <= eps
     return qi[ok], si[ok], t[ok]
 
@@ -931,7 +931,7 @@ def _arc_crossings(chains, arcs, eps):
                 continue
             t = np.where(np.abs(s[k]) <= eps, 0.0, s[k] / (s[k] - s[k + 1]))
             x = p[k] + t[:, None] * (p[k + 1] - p[k])
-            on = np.linalg.norm(closest_on_polyline(x, aj.points, aj.closed) - x, axis=1) <= eps
+            on = norm_rows(closest_on_polyline(x, aj.points, aj.closed) - x, axis=1) <= eps
             if on.any():
                 out.append(x[on])
     return out
@@ -1016,7 +1016,7 @@ def _check_coplanar_overlaps(members, projected, tol: float = 1e-9) -> None:
             mj, pj, nj, qj = polys[j]
             if mi.kind != "explicit" and mj.kind != "explicit":
                 continue
-            scale = float(np.linalg.norm(np.ptp(np.vstack([qi, qj]), axis=0)))
+            scale = float(norm_rows(np.ptp(np.vstack([qi, qj]), axis=0)))
             if np.linalg.norm(np.cross(ni, nj)) > tol or abs((pj - pi) @ ni) > tol * scale:
                 continue
             e1, e2, o = _frame_from_normal(ni, pi)
@@ -1176,7 +1176,7 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     p, q, r, s, f0, f1, ek = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok], ek[ok]
     n0 = cross_rows(P[q] - P[p], P[r] - P[p])
     n1 = cross_rows(P[p] - P[q], P[s] - P[q])
-    cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1), 1e-300)
+    cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(norm_rows(n0, axis=1) * norm_rows(n1, axis=1), 1e-300)
     new_key = np.minimum(r, s) * n + np.maximum(r, s)
     # the angle tests only for the pairs the dihedral and new-edge tests allow (each pair's
     # answer does not depend on the others)
@@ -1190,16 +1190,16 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     new_min = np.minimum(_tri_angles_min(P, t0), _tri_angles_min(P, t1))
     nn0 = cross_rows(P[t0[:, 1]] - P[t0[:, 0]], P[t0[:, 2]] - P[t0[:, 0]])
     nn1 = cross_rows(P[t1[:, 1]] - P[t1[:, 0]], P[t1[:, 2]] - P[t1[:, 0]])
-    navg = n0 / np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-300) + \
-        n1 / np.maximum(np.linalg.norm(n1, axis=1, keepdims=True), 1e-300)
+    navg = n0 / np.maximum(norm_rows(n0, axis=1, keepdims=True), 1e-300) + \
+        n1 / np.maximum(norm_rows(n1, axis=1, keepdims=True), 1e-300)
     good = new_min > old_min + min_gain
     # both new triangles keep the pair's orientation and stay within max_dihedral of its mean
     # normal: a thin new triangle spanning a bend (three close vertices of one chain around a
     # rounded leading edge) would lie in the member plane, across the skin
     cmax = np.cos(np.radians(max_dihedral))
-    un = navg / np.maximum(np.linalg.norm(navg, axis=1, keepdims=True), 1e-300)
-    good &= np.einsum("ij,ij->i", nn0, un) > cmax * np.linalg.norm(nn0, axis=1)
-    good &= np.einsum("ij,ij->i", nn1, un) > cmax * np.linalg.norm(nn1, axis=1)
+    un = navg / np.maximum(norm_rows(navg, axis=1, keepdims=True), 1e-300)
+    good &= np.einsum("ij,ij->i", nn0, un) > cmax * norm_rows(nn0, axis=1)
+    good &= np.einsum("ij,ij->i", nn1, un) > cmax * norm_rows(nn1, axis=1)
     cand = np.flatnonzero(good)
     if not len(cand):
         return T, 0
@@ -1247,7 +1247,7 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
     cen = (a + b + c) / 3
     nrm = cross_rows(b - a, c - a)
-    area = 0.5 * np.linalg.norm(nrm, axis=1)
+    area = 0.5 * norm_rows(nrm, axis=1)
     cand = np.flatnonzero(movable & (np.diff(ptr) > 0))
     if not len(cand):
         return P, 0
@@ -1262,7 +1262,7 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     vn = np.zeros((n, 3))
     for d in range(3):
         vn[:, d] = np.bincount(rows, weights=nrm[tris, d], minlength=n)
-    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+    vn /= np.maximum(norm_rows(vn, axis=1, keepdims=True), 1e-300)
     new = P.copy()
     mv = tgt[cand] - P[cand]
     mv -= np.einsum("ij,ij->i", mv, vn[cand])[:, None] * vn[cand]
@@ -1332,7 +1332,7 @@ def _angles3(Pn):
     a, b, c = Pn[:, 0], Pn[:, 1], Pn[:, 2]
 
     def ang(u, v):
-        cu = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
+        cu = np.einsum("ij,ij->i", u, v) / np.maximum(norm_rows(u, axis=1) * norm_rows(v, axis=1), 1e-300)
         return np.degrees(np.arccos(np.clip(cu, -1, 1)))
 
     return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
@@ -1590,7 +1590,7 @@ def coarsen_chains(mesh: ShellMesh, locator, chains, target: float, max_ratio: f
                         break
                     v, u, w = np.concatenate(vs), np.concatenate(us), np.concatenate(ws)
                     cix, pos, dv = np.concatenate(cis), np.concatenate(pss), np.concatenate(dvs)
-                    prio = np.linalg.norm(P[w] - P[u], axis=1)
+                    prio = norm_rows(P[w] - P[u], axis=1)
                     sel = (prio <= lmax) & (dv <= dmax)
                     v, u, w, prio, cix, pos, dv = v[sel], u[sel], w[sel], prio[sel], cix[sel], pos[sel], dv[sel]
                 else:
@@ -1603,7 +1603,7 @@ def coarsen_chains(mesh: ShellMesh, locator, chains, target: float, max_ratio: f
                     u = np.concatenate([b, a])
                     sel = (kind[v] == _FREE) & ~fixed[v] & ~hold[v] & on_chain[u]
                     v, u = v[sel], u[sel]
-                    prio = np.linalg.norm(P[v] - P[u], axis=1)
+                    prio = norm_rows(P[v] - P[u], axis=1)
                     sel = prio < near * float(target)
                     v, u, prio = v[sel], u[sel], prio[sel]
                     w = cix = pos = dv = np.zeros(len(v), np.int64)
@@ -1657,7 +1657,7 @@ def _chord_deviation(orig, oidx, pos, closed):
     ab = b - a
     L2 = np.einsum("ij,ij->i", ab, ab)
     t = np.clip(np.einsum("ij,ij->i", x - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    d = np.linalg.norm(a + t[:, None] * ab - x, axis=1)
+    d = norm_rows(a + t[:, None] * ab - x, axis=1)
     out = np.zeros(len(pos))
     np.maximum.at(out, k, d)
     return out
@@ -1718,7 +1718,7 @@ def _closest_on_segments(q, a, b, full: bool = False):
     lowest segment)."""
     q = np.atleast_2d(q)
     ab = b - a
-    L = np.linalg.norm(ab, axis=1)
+    L = norm_rows(ab, axis=1)
     tree = cKDTree(0.5 * (a + b))
     d0, _ = tree.query(q)
     cand = tree.query_ball_point(q, d0 + 0.5 * L.max() + 1e-300)
@@ -1728,7 +1728,7 @@ def _closest_on_segments(q, a, b, full: bool = False):
     L2 = np.einsum("ij,ij->i", ab[si], ab[si])
     t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
     x = a[si] + t[:, None] * ab[si]
-    dist = np.linalg.norm(x - q[qi], axis=1)
+    dist = norm_rows(x - q[qi], axis=1)
     order = np.lexsort((si, dist, qi))
     first = np.ones(len(order), bool)
     first[1:] = qi[order][1:] != qi[order][:-1]
@@ -1795,7 +1795,7 @@ class _SkinPatch:
         self.chains = list(chains)
         # a chain vertex collapse may not make a chain edge longer than 1.3 x the chain's
         # longest edge as imprinted (nor than 1.5 x the longer of the two edges it joins)
-        self.chain_lmax = [1.3 * float(np.linalg.norm(np.diff(P[c], axis=0), axis=1).max()) if len(c) > 1
+        self.chain_lmax = [1.3 * float(norm_rows(np.diff(P[c], axis=0), axis=1).max()) if len(c) > 1
                            else np.inf for c in self.chains]
         self.arcs = arcs
         self.chain_member = chain_member
@@ -2146,7 +2146,7 @@ class _SkinPatch:
         x = self.P[v]
         nb = self.neighbours(v)
         if k == _FREE:
-            L = float(np.mean(np.linalg.norm(self.P[nb] - x, axis=1)))
+            L = float(np.mean(norm_rows(self.P[nb] - x, axis=1)))
             tri = self.T[self.faces(v)]
             nrm = np.cross(self.P[tri[:, 1]] - self.P[tri[:, 0]], self.P[tri[:, 2]] - self.P[tri[:, 0]]).sum(0)
             nrm /= max(np.linalg.norm(nrm), 1e-300)
@@ -2170,7 +2170,7 @@ class _SkinPatch:
                 return np.zeros((0, 3))
             nbs = [arr[(i - 1) % len(arr)], arr[(i + 1) % len(arr)]]
             pts = np.vstack([arc.points, arc.points[:1]]) if arc.closed else arc.points
-            cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+            cum = np.concatenate([[0.0], np.cumsum(norm_rows(np.diff(pts, axis=0), axis=1))])
             s = _polyline_param(np.vstack([x, self.P[nbs]]), pts, cum)
             d = s[1:] - s[0]
             if arc.closed:
@@ -2180,8 +2180,8 @@ class _SkinPatch:
             q = np.stack([np.interp(sp, cum, pts[:, j]) for j in range(3)], 1)
             # the chain's spacing bound of collapse(): no chain edge at v longer than 1.3 x the chain's
             # longest edge as imprinted (or than the longer of the two now, if that is already over)
-            lq = np.linalg.norm(q[:, None, :] - self.P[nbs][None], axis=2).max(1)
-            lim = max(self.chain_lmax[ci], float(np.linalg.norm(self.P[nbs] - x, axis=1).max()))
+            lq = norm_rows(q[:, None, :] - self.P[nbs][None], axis=2).max(1)
+            lim = max(self.chain_lmax[ci], float(norm_rows(self.P[nbs] - x, axis=1).max()))
             return q[lq <= lim]
         if k == _CREASE:
             ws = [w for w in nb.tolist() if self.feat(v, w) == -1]
@@ -2190,7 +2190,7 @@ class _SkinPatch:
             a = np.array([0.05, 0.1, 0.2, 0.3, 0.4, 0.5])
             q = np.vstack([x + a[:, None] * (self.P[w] - x) for w in ws])
             xs, d = self.on_crease(q)
-            return xs[d <= 0.1 * np.linalg.norm(q - x, axis=1) + self.eps]
+            return xs[d <= 0.1 * norm_rows(q - x, axis=1) + self.eps]
         return np.zeros((0, 3))
 
     def move(self, v, iters=4):
@@ -2262,7 +2262,7 @@ class _SkinPatch:
         R0 = self._ring_faces(t)
         q_old = np.minimum(_min_angles_small(self.P[self.T[R0]]), cap)
         X = self.P[t]
-        L = np.linalg.norm(X[[1, 2, 0]] - X, axis=1)          # edge i joins corners i, i+1
+        L = norm_rows(X[[1, 2, 0]] - X, axis=1)          # edge i joins corners i, i+1
         cands = [("flip",)]
         for i in range(3):
             a, b = t[i], t[(i + 1) % 3]

@@ -50,7 +50,7 @@ from scipy.spatial import cKDTree
 
 from .errors import ImprintError, LayoutError, SizeError
 from .imprint import _closest_on_segments
-from .mesh import ShellMesh, vertex_faces
+from .mesh import ShellMesh, vertex_faces, norm_rows
 from .section import Plane
 
 __all__ = ["MemberInfo", "member_infos", "build_members", "member_statistics", "triangulate_planar",
@@ -157,11 +157,11 @@ def explicit_plane(spec, tol: float = 1e-9):
     lo_pts = np.asarray(spec.lower, float).reshape(-1, 3)
     d_lo = getattr(spec, "lower_direction", None)
     dirs = np.asarray([d_up] + ([] if d_lo is None else [d_lo]), float)
-    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs = dirs / norm_rows(dirs, axis=1, keepdims=True)
     pts = np.vstack([up_pts, lo_pts])
-    ext = float(np.linalg.norm(np.ptp(pts, axis=0)))
+    ext = float(norm_rows(np.ptp(pts, axis=0)))
     seg = np.diff(up_pts, axis=0)
-    k = int(np.argmax(np.linalg.norm(seg, axis=1)))
+    k = int(np.argmax(norm_rows(seg, axis=1)))
     n = np.cross(seg[k], dirs[0])
     ln = float(np.linalg.norm(n))
     if ext == 0 or ln <= 1e-12 * float(np.linalg.norm(seg[k])):
@@ -202,7 +202,7 @@ def _tri_min_angles(P: np.ndarray, T: np.ndarray) -> np.ndarray:
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
 
     def ang(u, v):
-        cu = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
+        cu = np.einsum("ij,ij->i", u, v) / np.maximum(norm_rows(u, axis=1) * norm_rows(v, axis=1), 1e-300)
         return np.degrees(np.arccos(np.clip(cu, -1.0, 1.0)))
 
     return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
@@ -240,7 +240,7 @@ def _sizing_field(x: np.ndarray, seg: np.ndarray, gradation: float):
     """Element size at points of the plane (units of the target size): the boundary node
     spacing near the boundary, graded at ``gradation`` towards 1 inside (finer boundary
     spacing shrinks it, coarser spacing enlarges it near the long edges)."""
-    L = np.linalg.norm(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
+    L = norm_rows(x[seg[:, 0]] - x[seg[:, 1]], axis=1)
     acc = np.bincount(seg.ravel(), weights=np.repeat(L, 2), minlength=len(x))
     cnt = np.bincount(seg.ravel(), minlength=len(x))
     used = cnt > 0
@@ -364,7 +364,7 @@ def _strip_width(x: np.ndarray, seg: np.ndarray, tris: np.ndarray, step: float =
     nodes ``x`` sampled every ``step``): how far the region's interior reaches from its boundary
     (half the height of a strip)."""
     a, b = x[seg[:, 0]], x[seg[:, 1]]
-    k = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / step).astype(np.int64))
+    k = np.maximum(1, np.ceil(norm_rows(b - a, axis=1) / step).astype(np.int64))
     s = np.repeat(np.arange(len(seg)), k)
     t = (np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)) / k[s]
     samples = np.vstack([a[s] + t[:, None] * (b[s] - a[s]), b])
@@ -487,7 +487,7 @@ def coons_patch(lower: np.ndarray, upper: np.ndarray, side0: np.ndarray, side1: 
                                "lower (0,0)->(1,0), upper (0,1)->(1,1), side0 (0,0)->(0,1), side1 (1,0)->(1,1)")
     splines, params = [], []
     for c in curves:
-        d = np.linalg.norm(np.diff(c, axis=0), axis=1)
+        d = norm_rows(np.diff(c, axis=0), axis=1)
         if not len(d) or (d <= 0).any():
             raise ImprintError("coons_patch: a side has repeated points or a single point; remove the duplicates")
         s = np.concatenate([[0.0], np.cumsum(d)]) / d.sum()
@@ -642,7 +642,7 @@ def _exact_crossing(P, v, mem: _Member, other: MemberInfo):
         den = s[i] - s[i + 1]
         t = s[i] / np.where(den != 0, den, 1.0)
         x = a[i] + t[:, None] * (a[i + 1] - a[i])
-        d = np.linalg.norm(x - P[v], axis=1)
+        d = norm_rows(x - P[v], axis=1)
         j = int(np.argmin(d))
         if d[j] < bd:
             best, bd = x[j], d[j]
@@ -759,7 +759,7 @@ def _gather(skin: ShellMesh, chains, infos, tol: float) -> list:
             mem.arcs = tuple(arcs)
         if not info.is_planar:
             pp, pn = _fit_plane(skin.points[mem.chain_vertices()], tol * diag / max(
-                float(np.linalg.norm(np.ptp(skin.points[mem.chain_vertices()], axis=0))), 1e-300))
+                float(norm_rows(np.ptp(skin.points[mem.chain_vertices()], axis=0))), 1e-300))
             if pn is not None:
                 mem.info = replace(info, plane_point=pp, plane_normal=pn)
             elif mem.loop is None and len(joints[0]) == len(joints[1]) and len(joints[0]):
@@ -990,7 +990,7 @@ def _arc_param(q: np.ndarray, poly: np.ndarray, closed: bool):
     """Arc-length parameter of the closest point on a polyline to each query point, and the
     polyline's cumulative lengths (:func:`~shellmesh_mdao.imprint._closest_on_segments`)."""
     p = np.vstack([poly, poly[:1]]) if closed else poly
-    L = np.linalg.norm(p[1:] - p[:-1], axis=1)
+    L = norm_rows(p[1:] - p[:-1], axis=1)
     cum = np.concatenate([[0.0], np.cumsum(L)])
     _, _, seg, t = _closest_on_segments(q, p[:-1], p[1:], full=True)
     return cum[seg] + t * L[seg], p, cum
@@ -1081,7 +1081,7 @@ def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: floa
             X[vv] = x[ok]
             n0, a0 = tri_state(P, fids)
             n1, a1 = tri_state(X, fids)
-            fold = np.einsum("ij,ij->i", n0, n1) <= 0.5 * np.linalg.norm(n0, axis=1) * np.linalg.norm(n1, axis=1)
+            fold = np.einsum("ij,ij->i", n0, n1) <= 0.5 * norm_rows(n0, axis=1) * norm_rows(n1, axis=1)
             # a move may not make its vertex's star worse than it was (or than min_skin_angle)
             worst = np.full(n, np.inf)
             for c in range(3):
@@ -1110,9 +1110,9 @@ def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: floa
 
 def _dist_to_polyline(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
     if len(poly) < 2:
-        return np.linalg.norm(q - poly[0], axis=1)
+        return norm_rows(q - poly[0], axis=1)
     s, p, cum = _arc_param(q, poly, False)
-    return np.linalg.norm(_arc_point(p, cum, s) - q, axis=1)
+    return norm_rows(_arc_point(p, cum, s) - q, axis=1)
 
 
 def _check_loop_corners(mems, P) -> None:
@@ -1125,7 +1125,7 @@ def _check_loop_corners(mems, P) -> None:
             continue
         L = P[m.loop]
         u, v = np.roll(L, 1, axis=0) - L, np.roll(L, -1, axis=0) - L
-        cosv = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1),
+        cosv = np.einsum("ij,ij->i", u, v) / np.maximum(norm_rows(u, axis=1) * norm_rows(v, axis=1),
                                                         1e-300)
         ang = np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0)))
         k = int(np.argmin(ang))
@@ -1144,7 +1144,7 @@ def _opposite_angle(P, tri, a, b):
     c = np.where((tri[:, 0] != a) & (tri[:, 0] != b), tri[:, 0],
                  np.where((tri[:, 1] != a) & (tri[:, 1] != b), tri[:, 1], tri[:, 2]))
     u, v = P[a] - P[c], P[b] - P[c]
-    cosv = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
+    cosv = np.einsum("ij,ij->i", u, v) / np.maximum(norm_rows(u, axis=1) * norm_rows(v, axis=1), 1e-300)
     return np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0)))
 
 
@@ -1165,7 +1165,7 @@ def _fan_fractions(P, a_, b_, apices, ck):
     t = np.zeros(len(rep))
     for c in apices:
         ca, cb = P[a_] - P[c], P[b_] - P[c]
-        la, lb = np.linalg.norm(ca, axis=1), np.linalg.norm(cb, axis=1)
+        la, lb = norm_rows(ca, axis=1), norm_rows(cb, axis=1)
         th = np.arccos(np.clip(np.einsum("ij,ij->i", ca, cb) / np.maximum(la * lb, 1e-300), -1.0, 1.0))
         phi = j * th[rep]
         num = la[rep] * np.sin(phi)
@@ -1240,7 +1240,7 @@ def _mirror_fractions(P, ch, other, L, thin, min_len: float, max_pieces: int):
     if not thin.any() or len(other) == 0:
         return cnt, frac
     s, p, cum = _arc_param(P[other], P[ch], False)
-    d = np.linalg.norm(_arc_point(p, cum, s) - P[other], axis=1)
+    d = norm_rows(_arc_point(p, cum, s) - P[other], axis=1)
     e = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, ne - 1)
     t = (s - cum[e]) * L[e] / np.maximum((cum[e + 1] - cum[e]) * L[e], 1e-300)   # fraction along the edge
     margin = np.maximum(min_len, 0.3 * d) / np.maximum(L[e], 1e-300)
@@ -1300,7 +1300,7 @@ def _split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, ma
                 if arc is None or len(ch) < 2:
                     continue
                 a, b = P[ch[:-1]], P[ch[1:]]
-                L = np.linalg.norm(b - a, axis=1)
+                L = norm_rows(b - a, axis=1)
                 H = _dist_to_polyline(0.5 * (a + b), P[other])
                 thin = (L > ratio * H) & (L >= 2 * min_piece * size)
                 want = np.where(H >= min_height * size, np.ceil(L / np.maximum(ratio * H, 1e-300)), 1)
@@ -1474,7 +1474,7 @@ def _point_in_polygon(q: np.ndarray, poly: np.ndarray, tol: float, chunk: int = 
             xc = a[None, :, 0] + (qy - a[None, :, 1]) * ab[None, :, 0] / ab[None, :, 1]
         inside = (np.count_nonzero(cond & (qx < xc), axis=1) % 2) == 1
         t = np.clip(np.einsum("qij,ij->qi", qq[:, None] - a[None], ab) / np.where(L2 > 0, L2, 1.0), 0, 1)
-        d = np.linalg.norm(a[None] + t[..., None] * ab[None] - qq[:, None], axis=2).min(1)
+        d = norm_rows(a[None] + t[..., None] * ab[None] - qq[:, None], axis=2).min(1)
         out[s:s + chunk] = inside & (d > tol)
     return out
 
@@ -1822,7 +1822,7 @@ def _mesh_panels(m: _Member, P, junctions, size, min_angle, n_total, tol):
                            "the repeated polyline point")
     ends = [junctions[m.closing[e]].nodes if m.closing[e] is not None else m.end_lines[e] for e in (0, 1)]
     sides = [ends[0]] + [m.kink_lines[i] for i in ou] + [ends[1]]
-    diag = float(np.linalg.norm(np.ptp(P, axis=0)))
+    diag = float(norm_rows(np.ptp(P, axis=0)))
     inner = [junctions[jx] for jx in m.interior]
     pos_u = [int(np.flatnonzero((U == J.vu) | (U == J.vl))[0]) for J in inner]
     pts, tris = [], []
@@ -1839,7 +1839,7 @@ def _mesh_panels(m: _Member, P, junctions, size, min_angle, n_total, tol):
         outline = np.concatenate([Up, sd[1][::-1][1:-1], Lp[::-1], sd[0][1:-1]])
         outline = outline[outline != np.roll(outline, 1)]
         lines_in = [inner[i].nodes for i in range(len(inner)) if ku[p] < pos_u[i] < ku[p + 1]]
-        ext = float(np.linalg.norm(np.ptp(P[outline], axis=0)))
+        ext = float(norm_rows(np.ptp(P[outline], axis=0)))
         pp, pn = _fit_plane(P[outline], tol * diag / max(ext, 1e-300))
         panel = _Member(replace(m.info, plane_point=pp, plane_normal=pn), upper=Up, lower=Lp)
         if pn is not None:
@@ -1879,10 +1879,10 @@ def _mesh_coons(m: _Member, P, junctions, size, min_angle, n_total):
             ln = ln[::-1]
         sides.append(ln)
     S, (sl, su, s0, s1) = coons_patch(P[L], P[U], P[sides[0]], P[sides[1]])
-    len_s = 0.5 * (np.linalg.norm(np.diff(P[U], axis=0), axis=1).sum()
-                   + np.linalg.norm(np.diff(P[L], axis=0), axis=1).sum())
-    len_t = 0.5 * (np.linalg.norm(np.diff(P[sides[0]], axis=0), axis=1).sum()
-                   + np.linalg.norm(np.diff(P[sides[1]], axis=0), axis=1).sum())
+    len_s = 0.5 * (norm_rows(np.diff(P[U], axis=0), axis=1).sum()
+                   + norm_rows(np.diff(P[L], axis=0), axis=1).sum())
+    len_t = 0.5 * (norm_rows(np.diff(P[sides[0]], axis=0), axis=1).sum()
+                   + norm_rows(np.diff(P[sides[1]], axis=0), axis=1).sum())
     nodes = np.concatenate([L, sides[1][1:-1], U[::-1], sides[0][1:-1][::-1]])
     uv = np.vstack([np.stack([sl * len_s, np.zeros_like(sl)], 1),
                     np.stack([np.full(len(s1) - 2, len_s), s1[1:-1] * len_t], 1),

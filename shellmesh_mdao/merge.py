@@ -33,7 +33,7 @@ import numpy as np
 from scipy import sparse
 
 from .errors import MeshValidationError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, norm_rows
 from .split import _fixed_edge_mask, _highs_solve, polygon_energy
 
 __all__ = ["MergeResult", "merge_candidates", "merge_triangles", "quad_energy"]
@@ -79,7 +79,7 @@ def quad_energy(corners, *, c1: float = 1.0, c2: float = 1.0, c3: float = 1.0,
 
 
 def _unit(v):
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    n = norm_rows(v, axis=-1, keepdims=True)
     return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
 
 
@@ -133,7 +133,7 @@ def merge_candidates(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: f
     n1 = _unit(np.cross(P[a] - P[b], P[d] - P[b]))
     dih = np.degrees(np.arccos(np.clip((n0 * n1).sum(1), -1, 1)))
     allowed = ((sj > max(min_jacobian, 0.0)).all(1) & (ang >= min_angle).all(1) & (ang <= max_angle).all(1)
-               & (dih <= max_dihedral) & (np.linalg.norm(n0, axis=1) > 0) & (np.linalg.norm(n1, axis=1) > 0))
+               & (dih <= max_dihedral) & (norm_rows(n0, axis=1) > 0) & (norm_rows(n1, axis=1) > 0))
     # ---- weights: e(quad) - e(t0) - e(t1)
     e_q = quad_energy(Q, c1=c1, c2=c2, c3=c3, form=form)
     T = np.zeros((len(f0), 4, 3))

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import SizeError, ShellMeshError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, norm_rows
 from .quality import scaled_jacobian, warp
 
 log = logging.getLogger("shellmesh_mdao")
@@ -336,7 +336,7 @@ def stage_imprint(state: PipelineState) -> PipelineState:
     for c in chains:
         e = members.setdefault(c.member, {"chains": []})
         e["chains"].append({"side": c.side, "n_vertices": int(c.n_vertices), "snap": float(c.snap),
-                            "length": float(np.linalg.norm(np.diff(mesh.points[c.vertices], axis=0), axis=1).sum())})
+                            "length": float(norm_rows(np.diff(mesh.points[c.vertices], axis=0), axis=1).sum())})
     st.report["members"] = members
     return st
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ProjectionError
+from .mesh import norm_rows
 
 __all__ = ["SurfaceLocator", "closest_point_on_triangles", "ray_triangle_intersect",
            "project_wing_stations", "project_polyline", "project_layout", "ProjectedMember"]
@@ -235,7 +236,7 @@ class SurfaceLocator:
         # same formula everywhere), in the shifted frame
         t = self.triangles[idx]
         cl = closest_point_on_triangles(ql, self._local[t[:, 0]], self._local[t[:, 1]], self._local[t[:, 2]])
-        dist = np.linalg.norm(cl - ql, axis=1)
+        dist = norm_rows(cl - ql, axis=1)
         return cl + self._center, idx, dist
 
     def raycast(self, origins, directions):
@@ -255,7 +256,7 @@ class SurfaceLocator:
             return hit_pts, tri_idx, dist
         if not (np.isfinite(o).all() and np.isfinite(d).all()):
             raise ProjectionError("ray query with NaN/inf origin or direction: give finite values")
-        dn = np.linalg.norm(d, axis=1)
+        dn = norm_rows(d, axis=1)
         if (dn <= 0).any():
             bad = np.flatnonzero(dn <= 0)[:5].tolist()
             raise ProjectionError(f"ray direction of zero length (rays {bad}): give a non-zero direction")
@@ -269,7 +270,7 @@ class SurfaceLocator:
         tri_f, t_f, p_f = self._refine(ol[hit], d[hit], prim[hit])
         hit_pts[hit] = p_f + self._center
         tri_idx[hit] = tri_f
-        dist[hit] = np.linalg.norm(p_f - ol[hit], axis=1)
+        dist[hit] = norm_rows(p_f - ol[hit], axis=1)
         return hit_pts, tri_idx, dist
 
     def _refine(self, o, d, prim):
@@ -439,7 +440,7 @@ def _tri_normals(locator: SurfaceLocator, tri: np.ndarray) -> np.ndarray:
     t = locator.triangles[np.asarray(tri, np.int64)]
     L = locator._local
     n = np.cross(L[t[:, 1]] - L[t[:, 0]], L[t[:, 2]] - L[t[:, 0]])
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    ln = norm_rows(n, axis=1, keepdims=True)
     return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
 

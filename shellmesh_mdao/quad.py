@@ -34,7 +34,7 @@ from scipy import sparse
 from scipy.sparse import linalg as spla
 
 from .errors import MeshValidationError
-from .mesh import ShellMesh, cross_rows, vertex_faces
+from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .quality import element_quality
 from .smooth import (CURVE, FIXED, SURFACE, Supports, _draped_vertices, _face_normals, _face_quality, _face_rings,
                      _min_corner_sj, _support_normals, untangle)
@@ -43,7 +43,7 @@ __all__ = ["subdivide_to_quads", "subdivide_faces", "settle_off_surface", "plana
 
 
 def _unit(a):
-    n = np.linalg.norm(a, axis=1, keepdims=True)
+    n = norm_rows(a, axis=1, keepdims=True)
     return np.divide(a, n, out=np.zeros_like(a), where=n > 0)
 
 
@@ -246,7 +246,7 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
         x = np.where((pk == FIXED)[:, None], X_new, x)
         X_new, kept = _guard_folds(P, X_new, x, children, parent, fn, guard_jacobian)
         # guarded skin nodes that are off the surface (not merely rounding apart)
-        kept &= (new_kind == SURFACE) & (np.linalg.norm(x - X_new, axis=1) > 1e-9 * mesh.diagonal)
+        kept &= (new_kind == SURFACE) & (norm_rows(x - X_new, axis=1) > 1e-9 * mesh.diagonal)
     sup = supports.extended(new_kind, new_ref)
     # feature edges of the new mesh with their curves
     ec_old = supports.curve_of_edges(fe)
@@ -437,7 +437,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     rq = rq[quad[rq]]
     Q = F[rq, :4]
     # local size: mean edge of the residual quads at each node
-    L = np.linalg.norm(P[Q] - P[np.roll(Q, -1, axis=1)], axis=2).mean(1)
+    L = norm_rows(P[Q] - P[np.roll(Q, -1, axis=1)], axis=2).mean(1)
     hs = np.bincount(Q.ravel(), weights=np.repeat(L, 4), minlength=n)
     hc = np.bincount(Q.ravel(), minlength=n)
     cand = cand[hc[cand] > 0]
@@ -448,7 +448,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     col = np.full(n, -1, np.int64)
     col[cand] = np.arange(len(cand))
     nu = mesh.vertex_normals()[cand]
-    D = 0.5 * (np.linalg.norm(P[Q[:, 2]] - P[Q[:, 0]], axis=1) + np.linalg.norm(P[Q[:, 3]] - P[Q[:, 1]], axis=1))
+    D = 0.5 * (norm_rows(P[Q[:, 2]] - P[Q[:, 0]], axis=1) + norm_rows(P[Q[:, 3]] - P[Q[:, 1]], axis=1))
     t = np.zeros(len(cand))
     for _ in range(int(iterations)):
         X = P.copy()

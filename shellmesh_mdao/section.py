@@ -21,6 +21,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components, depth_first_order
 
 from .errors import ImprintError
+from .mesh import norm_rows
 
 __all__ = ["Plane", "PlaneSection", "plane_section", "section_arc", "SectionArc"]
 
@@ -76,7 +77,7 @@ class SectionArc:
     @property
     def length(self) -> float:
         p = np.vstack([self.points, self.points[:1]]) if self.closed else self.points
-        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+        return float(norm_rows(np.diff(p, axis=0), axis=1).sum())
 
 
 def plane_section(points: np.ndarray, tris: np.ndarray, plane: Plane, zero_vertices=None) -> PlaneSection:
@@ -120,8 +121,8 @@ def _cut_at_vertices(sec: PlaneSection, stops: np.ndarray, points: np.ndarray) -
     at = np.full(len(ne), -1, np.int64)
     for col in (0, 1):
         v = ne[:, col]
-        on = is_stop[v] & (np.linalg.norm(sec.nodes - points[v], axis=1) <= 1e-12 * (
-            1.0 + np.linalg.norm(points[ne[:, 0]] - points[ne[:, 1]], axis=1)))
+        on = is_stop[v] & (norm_rows(sec.nodes - points[v], axis=1) <= 1e-12 * (
+            1.0 + norm_rows(points[ne[:, 0]] - points[ne[:, 1]], axis=1)))
         at = np.where(on & (at < 0), v, at)
     a, b = sec.links[:, 0], sec.links[:, 1]
     va, vb = at[a], at[b]
@@ -184,7 +185,7 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
     if bound_tol > 0 and len(bounds):
         # drop slivers of links that only touch a bound (zero-length links elsewhere stay)
         clipped = (t0 > 0) | (t1 < 1)
-        keep = (t1 > t0) & ~(clipped & ((t1 - t0) * np.linalg.norm(p1 - p0, axis=1) <= bound_tol))
+        keep = (t1 > t0) & ~(clipped & ((t1 - t0) * norm_rows(p1 - p0, axis=1) <= bound_tol))
     else:
         keep = t1 > t0
     if not keep.any():
@@ -218,7 +219,7 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
         ab = b - a
         L2 = np.einsum("ij,ij->i", ab, ab)
         tt = np.clip(np.einsum("ij,ij->i", seed - a, ab) / np.where(L2 > 0, L2, 1.0), 0, 1)
-        dist = np.linalg.norm(a + tt[:, None] * ab - seed, axis=1)
+        dist = norm_rows(a + tt[:, None] * ab - seed, axis=1)
         best = cand[int(np.argmin(dist))]
     else:
         best = 0
@@ -243,7 +244,7 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
     # drop zero-length pieces (plane through vertices)
     if merge_tol is None:
         merge_tol = 1e-12 * float(np.linalg.norm(pts.max(0) - pts.min(0)))
-    step = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    step = norm_rows(np.diff(pts, axis=0), axis=1)
     keep_pt = np.concatenate([[True], step > merge_tol])
     if closed:
         keep_pt[-1] &= np.linalg.norm(pts[-1] - pts[0]) > merge_tol or len(pts) < 3

@@ -63,7 +63,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .mesh import ShellMesh, cross_rows, vertex_faces
+from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
 
@@ -657,7 +657,7 @@ def _min_corner_sj(P, faces, is_tri, nref=None):
         E = np.roll(C, -1, axis=1) - C                          # e_next at corner i
         Ep = np.roll(E, 1, axis=1)                              # -e_prev
         cr = cross_rows(Ep, E)
-        L = np.linalg.norm(E, axis=2)
+        L = norm_rows(E, axis=2)
         den = L * np.roll(L, 1, axis=1)
         for nn in (nown[mask], None if nref is None else nref[mask]):
             if nn is None:

@@ -35,7 +35,7 @@ import numpy as np
 from scipy import sparse
 
 from .errors import MeshValidationError, ProjectionError, SolverError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, norm_rows
 
 __all__ = ["SplitOptions", "SplitResult", "SplitLP", "split_options", "polygon_energy", "split_energy",
            "build_split_lp", "split_polygons", "N_OPTIONS", "TRI", "QUAD"]
@@ -167,7 +167,7 @@ def polygon_energy(corners, is_tri, c1: float = 1.0, c2: float = 1.0, form: str 
     valid[tri, 3] = False
     rows = np.arange(k)[:, None]
     d = P[rows, nxt] - P                             # side i: corner i -> next corner
-    L = np.linalg.norm(d, axis=2)
+    L = norm_rows(d, axis=2)
     n = np.where(tri, 3.0, 4.0)
     Lm = np.where(valid, L, 0.0)
     lavg = Lm.sum(1) / n
