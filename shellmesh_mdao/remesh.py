@@ -1355,9 +1355,10 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         if not len(o):
             break
         best = np.zeros(n, np.int64)
-        np.maximum.at(best, r, rank[o])
+        ro = rank[o]
+        np.maximum.at(best, r, ro)
         lose = np.zeros(ncand, bool)
-        lose[o[best[r] != rank[o]]] = True
+        lose[o[best[r] != ro]] = True
         win = np.flatnonzero(alive & ~lose)
         if not len(win):
             break
