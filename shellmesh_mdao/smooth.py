@@ -636,7 +636,12 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
 
 # ============================================================================ element checks
 def _face_normals(P, faces, is_tri):
-    c = P[np.where(faces >= 0, faces, faces[:, :1])]
+    return _corner_normals(P[np.where(faces >= 0, faces, faces[:, :1])], is_tri)
+
+
+def _corner_normals(c, is_tri):
+    """Unit normals of elements given by their corners ``c`` (m, 4, 3) (a triangle's fourth
+    corner is not read)."""
     v = cross_rows(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
     if is_tri.any():
         ct = c[is_tri]
@@ -648,8 +653,13 @@ def _min_corner_sj(P, faces, is_tri, nref=None):
     """Per element: min over corners of the scaled Jacobian against the element's own normal
     and (if given) against ``nref``; triangles scaled by 2/sqrt(3) (1 = equilateral)."""
     c = P[np.where(faces >= 0, faces, faces[:, :1])]           # (m, 4, 3)
-    nown = _face_normals(P, faces, is_tri)
-    out = np.full(len(faces), np.inf)
+    return _corner_min_sj(c, is_tri, _corner_normals(c, is_tri), nref)
+
+
+def _corner_min_sj(c, is_tri, nown, nref=None):
+    """:func:`_min_corner_sj` of elements given by their corners ``c`` (m, 4, 3) and unit
+    normals ``nown``."""
+    out = np.full(len(c), np.inf)
     for mask, k, scale in ((~is_tri, 4, 1.0), (is_tri, 3, _TRI_SJ)):
         if not mask.any():
             continue
@@ -1326,12 +1336,9 @@ def _face_quality(C, is_tri, nref):
     """Per element with corner positions ``C`` (k, 4, 3): the scaled Jacobian (own normal,
     :func:`_min_corner_sj`), replaced by ``dot - 1`` (in [-2, -1]) where the element's own
     normal points against its reference normal ``nref`` (k, 3) (a flipped element)."""
-    k = len(C)
-    faces = np.arange(4 * k, dtype=np.int64).reshape(k, 4)
-    faces[is_tri, 3] = -1
-    flat = C.reshape(-1, 3)
-    sj = _min_corner_sj(flat, faces, is_tri)
-    d = _dot(_face_normals(flat, faces, is_tri), nref)
+    nown = _corner_normals(C, is_tri)                   # computed once for both uses
+    sj = _corner_min_sj(C, is_tri, nown)
+    d = _dot(nown, nref)
     return np.where(d > 0, sj, d - 1.0)
 
 
