@@ -1173,7 +1173,7 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     r = T[f0, (s0 + 2) % 3]
     s = T[f1, (s1 + 2) % 3]
     ok = (T[f1, s1] == q) & (T[f1, (s1 + 1) % 3] == p) & (r != s)
-    p, q, r, s, f0, f1, ek = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok], ek[ok]
+    p, q, r, s, f0, f1 = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok]
     n0 = cross_rows(P[q] - P[p], P[r] - P[p])
     n1 = cross_rows(P[p] - P[q], P[s] - P[q])
     cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(norm_rows(n0, axis=1) * norm_rows(n1, axis=1), 1e-300)
@@ -1181,7 +1181,7 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     # the angle tests only for the pairs the dihedral and new-edge tests allow (each pair's
     # answer does not depend on the others)
     pre = np.flatnonzero((cosd > np.cos(np.radians(max_dihedral))) & ~np.isin(new_key, uk))
-    p, q, r, s, f0, f1, ek, n0, n1, new_key = (x[pre] for x in (p, q, r, s, f0, f1, ek, n0, n1, new_key))
+    p, q, r, s, f0, f1, n0, n1, new_key = (x[pre] for x in (p, q, r, s, f0, f1, n0, n1, new_key))
     # (p, q, r) and (q, p, s) are the triangles f0 and f1 themselves, rotated: the same angles
     tmin = _tri_angles_min(P, T)
     old_min = np.minimum(tmin[f0], tmin[f1])
