@@ -20,11 +20,14 @@ install-system:
 	    || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || ! command -v mpirun >/dev/null 2>&1; then \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(SYSTEM_PACKAGES) >/dev/null; fi
 
+# the last line compiles the numba kernels once (cached next to the package), so the first run does not
 install: install-system
 	$(PYTHON) -m pip install --quiet -e .
+	$(PYTHON) -c "import shellmesh_mdao.kernels as k; k.warm_up()"
 
 install-test: install-system
 	$(PYTHON) -m pip install --quiet -e ".[test]"
+	$(PYTHON) -c "import shellmesh_mdao.kernels as k; k.warm_up()"
 
 demo: install
 	$(PYTHON) -m shellmesh_mdao.cli demo --out-dir $(DEMO_DIR)

@@ -14,6 +14,7 @@ setup(
     package_data={"shellmesh_mdao": ["data/*", "data/licenses/*"]},
     install_requires=[
         "numpy>=1.24",
+        "numba>=0.59",
         "scipy>=1.10",
         "openmdao>=3.30",
         "trimesh>=4.0",

@@ -38,6 +38,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
+from .kernels import common_neighbour_counts, greedy_independent
 from .mesh import ShellMesh, cross_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -73,32 +74,8 @@ def _independent(owner, res, rank, nres, max_sub=12):
     """Greedy maximal independent set of candidates: candidate ``owner[i]`` uses resource
     ``res[i]``; two selected candidates never share a resource. Each sub-round selects
     the candidates of highest ``rank`` among all candidates sharing a resource with them,
-    then drops everything touching a selected resource."""
-    ncand = len(rank)
-    sel = np.zeros(ncand, bool)
-    alive = np.ones(ncand, bool)
-    taken = np.zeros(nres, bool)
-    o, r = owner, res                  # entries of the candidates still alive
-    for _ in range(max_sub):
-        m = alive[o]
-        o, r = o[m], r[m]
-        if not len(o):
-            break
-        best = np.zeros(nres, np.int64)
-        np.maximum.at(best, r, rank[o])
-        lose = np.zeros(ncand, bool)
-        lose[o[best[r] != rank[o]]] = True
-        win = alive & ~lose
-        if not win.any():
-            break
-        sel |= win
-        taken[r[win[o]]] = True
-        dead = np.zeros(ncand, bool)
-        dead[o[taken[r]]] = True
-        alive &= ~dead & ~win
-        if not alive.any():
-            break
-    return sel
+    then drops everything touching a selected resource (:func:`kernels.greedy_independent`)."""
+    return greedy_independent(owner, res, rank, nres, max_sub=max_sub)
 
 
 def _tri_normals(P, F):
@@ -1236,13 +1213,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
     opp1 = np.where(h1 >= 0, F[np.maximum(h1, 0) // 3, (np.maximum(h1, 0) % 3 + 2) % 3], -1)
     u, v = E[cand, 0], E[cand, 1]
     ok = (deg[opp0] > 3) & ((opp1 < 0) | (deg[np.maximum(opp1, 0)] > 3))
-    ow_u, pu = _expand(nptr, u)
-    ow_v, pv = _expand(nptr, v)
-    owner = np.concatenate([ow_u, ow_v])
-    x = np.concatenate([nbr[pu], nbr[pv]])
-    ks = np.sort(owner * n + x)
-    dup = ks[1:][ks[1:] == ks[:-1]] // n
-    ok &= np.bincount(dup, minlength=ncand) == T.valence[cand]
+    ok &= common_neighbour_counts(nptr, nbr, u, v) == T.valence[cand]
     boundary_v = np.zeros(n, bool)
     boundary_v[E[T.valence == 1].reshape(-1)] = True
     ok &= ~((T.valence[cand] == 2) & boundary_v[u] & boundary_v[v])
@@ -1345,40 +1316,24 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
 
     # ---- greedy independent set over lock regions (closed 1-rings of both ends),
     #      validating the winners of each sub-round geometrically
-    rank = _rank(prio, cand)
-    taken = np.zeros(n, bool)
+    ow_u, pu = _expand(nptr, u)
+    ow_v, pv = _expand(nptr, v)
     acc_a, acc_b = [], []
-    o, r = owner, x                    # lock-region entries of the candidates still alive
-    for _ in range(16):
-        m = alive[o]
-        o, r = o[m], r[m]
-        if not len(o):
-            break
-        best = np.zeros(n, np.int64)
-        ro = rank[o]
-        np.maximum.at(best, r, ro)
-        lose = np.zeros(ncand, bool)
-        lose[o[best[r] != ro]] = True
-        win = np.flatnonzero(alive & ~lose)
-        if not len(win):
-            break
+
+    def check(win):
         # both directions of every winner in one batch (u -> v first, then v -> u)
         sc = geometric(np.concatenate([u[win], v[win]]), np.concatenate([v[win], u[win]]),
                        np.concatenate([dir_ok[win, 0], dir_ok[win, 1]])).reshape(2, -1).T
         good = np.isfinite(sc).any(1)
-        alive[win[~good]] = False
-        win, sc = win[good], sc[good]
-        if len(win):
-            d = np.argmin(sc, axis=1)          # ties: remove u (the smaller index)
-            acc_a.append(np.where(d == 0, u[win], v[win]))
-            acc_b.append(np.where(d == 0, v[win], u[win]))
-            wmask = np.zeros(ncand, bool)
-            wmask[win] = True
-            taken[r[wmask[o]]] = True
-            alive[win] = False
-            alive[o[taken[r]]] = False
-        if not alive.any():
-            break
+        if good.any():
+            w, s = win[good], sc[good]
+            d = np.argmin(s, axis=1)           # ties: remove u (the smaller index)
+            acc_a.append(np.where(d == 0, u[w], v[w]))
+            acc_b.append(np.where(d == 0, v[w], u[w]))
+        return good
+
+    greedy_independent(np.concatenate([ow_u, ow_v]), np.concatenate([nbr[pu], nbr[pv]]), _rank(prio, cand), n,
+                       alive=alive, check=check, max_sub=16)
     if not acc_a:
         return 0
     a = np.concatenate(acc_a)

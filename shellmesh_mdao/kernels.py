@@ -1,0 +1,206 @@
+"""Compiled kernels (numba) for the loops numpy cannot vectorise.
+
+Everything else in the package is numpy on whole arrays. A few steps are sequential by
+nature: a greedy independent set is built sub-round by sub-round, and each sub-round
+depends on the one before. Written in numpy, every sub-round filters and gathers the
+entries of every candidate still in play. On a 1.5M-triangle input that was most of the
+remesh's time. Here the same result comes from one pass over the entries.
+
+The functions are compiled on first use and cached on disk next to this file (numba's
+``cache=True``; :func:`warm_up` does it ahead); every result is the same, bit for bit, as the numpy code it replaces
+(the tests compare the two).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["greedy_independent", "common_neighbour_counts", "warm_up"]
+
+
+# ============================================================================ independent sets
+@njit(cache=True, nogil=True)
+def _build(owner, res, alive, rank, ncand, nres):
+    """CSR of the entries of the live candidates: per candidate its resources (``cptr``,
+    ``cres``), per resource its candidates by falling rank (``rptr``, ``rcand``; filled
+    candidate by candidate from the highest rank down, so no list needs sorting)."""
+    ccnt = np.zeros(ncand + 1, np.int64)
+    rcnt = np.zeros(nres + 1, np.int64)
+    for e in range(owner.shape[0]):
+        c = owner[e]
+        if alive[c]:
+            ccnt[c + 1] += 1
+            rcnt[res[e] + 1] += 1
+    cptr = np.cumsum(ccnt)
+    rptr = np.cumsum(rcnt)
+    cres = np.empty(cptr[ncand], np.int64)
+    cfill = cptr[:ncand].copy()
+    for e in range(owner.shape[0]):
+        c = owner[e]
+        if alive[c]:
+            cres[cfill[c]] = res[e]
+            cfill[c] += 1
+    by_rank = np.empty(ncand, np.int64)         # candidates, highest rank first
+    for c in range(ncand):
+        by_rank[ncand - rank[c]] = c
+    rcand = np.empty(rptr[nres], np.int64)
+    rfill = rptr[:nres].copy()
+    for i in range(ncand):
+        c = by_rank[i]
+        for k in range(cptr[c], cptr[c + 1]):
+            r = cres[k]
+            rcand[rfill[r]] = c
+            rfill[r] += 1
+    return cptr, cres, rptr, rcand
+
+
+@njit(cache=True, nogil=True)
+def _top(r, rtop, rptr, rcand, resolved):
+    """Highest-ranked candidate of resource ``r`` still in play (-1: none)."""
+    p = rtop[r]
+    end = rptr[r + 1]
+    while p < end and resolved[rcand[p]]:
+        p += 1
+    rtop[r] = p
+    return rcand[p] if p < end else -1
+
+
+@njit(cache=True, nogil=True)
+def _wins(c, cptr, cres, rtop, rptr, rcand, resolved):
+    """True when ``c`` is the highest-ranked candidate in play on every one of its resources."""
+    for k in range(cptr[c], cptr[c + 1]):
+        if _top(cres[k], rtop, rptr, rcand, resolved) != c:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand):
+    out = np.empty(ncand, np.int64)
+    k = 0
+    for c in range(ncand):
+        if not resolved[c] and _wins(c, cptr, cres, rtop, rptr, rcand, resolved):
+            out[k] = c
+            k += 1
+    return out[:k]
+
+
+@njit(cache=True, nogil=True)
+def _next_wave(win, acc, cptr, cres, rtop, rptr, rcand, resolved, seen, wave):
+    """Resolve the winners ``win`` (``acc``: taken, else dropped), drop every candidate in
+    play on a resource of a taken winner, and return the next sub-round's winners (sorted):
+    only a new top of a resource of a resolved candidate can be one."""
+    ncand = resolved.shape[0]
+    new = np.empty(ncand, np.int64)
+    nn = 0
+    for i in range(win.shape[0]):
+        resolved[win[i]] = True
+        new[nn] = win[i]
+        nn += 1
+    for i in range(win.shape[0]):
+        if acc[i]:
+            c = win[i]
+            for k in range(cptr[c], cptr[c + 1]):
+                r = cres[k]
+                for p in range(rtop[r], rptr[r + 1]):
+                    d = rcand[p]
+                    if not resolved[d]:
+                        resolved[d] = True
+                        new[nn] = d
+                        nn += 1
+    out = np.empty(ncand, np.int64)
+    no = 0
+    for i in range(nn):
+        d = new[i]
+        for k in range(cptr[d], cptr[d + 1]):
+            t = _top(cres[k], rtop, rptr, rcand, resolved)
+            if t >= 0 and seen[t] != wave:
+                seen[t] = wave
+                if _wins(t, cptr, cres, rtop, rptr, rcand, resolved):
+                    out[no] = t
+                    no += 1
+    return np.sort(out[:no])
+
+
+def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_sub=12):
+    """Greedy maximal independent set of candidates over shared resources.
+
+    Candidate ``owner[i]`` uses resource ``res[i]`` (``0 <= res < nres``); ``rank`` is a unique
+    integer per candidate (higher first; 1..ncand is fastest); ``alive`` (bool per
+    candidate, default all) leaves the others out. Sub-round by sub-round (at most ``max_sub``), every candidate in play
+    that outranks every other candidate in play on each of its resources wins;
+    ``check(winners) -> bool array`` (default: all True) keeps some of them. A kept winner
+    takes its resources and every other candidate on them drops out; a winner not kept
+    just drops out. Returns the bool mask of the kept winners.
+
+    The same sets as running the sub-rounds on whole arrays (select the local maxima, drop
+    what touches a taken resource, repeat), but each entry is visited a bounded number of
+    times instead of once per sub-round."""
+    rank = np.ascontiguousarray(rank, dtype=np.int64)
+    ncand = len(rank)
+    sel = np.zeros(ncand, bool)
+    if not ncand:
+        return sel
+    if rank.min() != 1 or rank.max() != ncand or not np.bincount(rank, minlength=ncand + 1)[1:].all():
+        # not 1..ncand: the same order as dense ranks
+        dense = np.empty(ncand, np.int64)
+        dense[np.argsort(rank, kind="stable")] = np.arange(1, ncand + 1)
+        if len(np.unique(rank)) != ncand:
+            raise ValueError("greedy_independent needs a unique rank per candidate")
+        rank = dense
+    alive = np.ones(ncand, bool) if alive is None else np.ascontiguousarray(alive, dtype=np.bool_)
+    owner = np.ascontiguousarray(owner, dtype=np.int64)
+    res = np.ascontiguousarray(res, dtype=np.int64)
+    cptr, cres, rptr, rcand = _build(owner, res, alive, rank, ncand, int(nres))
+    rtop = rptr[:-1].copy()
+    resolved = ~alive
+    seen = np.full(ncand, -1, np.int64)
+    win = _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand)
+    for wave in range(max_sub):
+        if not len(win):
+            break
+        good = np.ones(len(win), bool) if check is None else np.asarray(check(win), dtype=np.bool_)
+        sel[win[good]] = True
+        if wave + 1 == max_sub:
+            break
+        win = _next_wave(win, good, cptr, cres, rtop, rptr, rcand, resolved, seen, wave)
+    return sel
+
+
+# ============================================================================ topology
+@njit(cache=True, nogil=True)
+def _common(nptr, nbr, u, v, n):
+    stamp = np.full(n, -1, np.int64)
+    out = np.zeros(u.shape[0], np.int64)
+    for i in range(u.shape[0]):
+        a = u[i]
+        for p in range(nptr[a], nptr[a + 1]):
+            stamp[nbr[p]] = i
+        b = v[i]
+        c = 0
+        for p in range(nptr[b], nptr[b + 1]):
+            if stamp[nbr[p]] == i:
+                c += 1
+        out[i] = c
+    return out
+
+
+def common_neighbour_counts(nptr, nbr, u, v):
+    """Number of common neighbours of ``u[i]`` and ``v[i]`` in the graph with CSR
+    neighbour lists ``(nptr, nbr)`` (lists without repeats)."""
+    u = np.ascontiguousarray(u, dtype=np.int64)
+    v = np.ascontiguousarray(v, dtype=np.int64)
+    return _common(np.ascontiguousarray(nptr, dtype=np.int64), np.ascontiguousarray(nbr, dtype=np.int64),
+                   u, v, len(nptr) - 1)
+
+
+def warm_up() -> float:
+    """Compile every kernel (or load it from numba's cache) on a tiny input; returns the
+    seconds it took (about 6 s on a new install, 0.3 s once cached). Run by ``make install``
+    and by the benchmark before its clock starts."""
+    import time
+    t0 = time.perf_counter()
+    greedy_independent(np.array([0, 1, 1]), np.array([0, 0, 1]), np.array([1, 2]), 2,
+                       check=lambda w: np.ones(len(w), bool), max_sub=3)
+    common_neighbour_counts(np.array([0, 1, 2]), np.array([1, 0]), np.array([0]), np.array([1]))
+    return time.perf_counter() - t0

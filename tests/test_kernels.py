@@ -1,0 +1,111 @@
+"""The compiled kernels give the same sets and counts as the whole-array numpy code they replace."""
+import numpy as np
+import pytest
+
+from shellmesh_mdao.kernels import common_neighbour_counts, greedy_independent
+
+
+def _batch_reference(owner, res, rank, nres, alive, check, max_sub):
+    """The sub-rounds on whole arrays (the remesh's selection before the kernel)."""
+    ncand = len(rank)
+    alive = alive.copy()
+    sel = np.zeros(ncand, bool)
+    taken = np.zeros(nres, bool)
+    o, r = owner, res
+    for _ in range(max_sub):
+        m = alive[o]
+        o, r = o[m], r[m]
+        if not len(o):
+            break
+        best = np.zeros(nres, np.int64)
+        np.maximum.at(best, r, rank[o])
+        lose = np.zeros(ncand, bool)
+        lose[o[best[r] != rank[o]]] = True
+        win = np.flatnonzero(alive & ~lose)
+        if not len(win):
+            break
+        good = check(win)
+        alive[win[~good]] = False
+        win = win[good]
+        if len(win):
+            sel[win] = True
+            wmask = np.zeros(ncand, bool)
+            wmask[win] = True
+            taken[r[wmask[o]]] = True
+            alive[win] = False
+            alive[o[taken[r]]] = False
+        if not alive.any():
+            break
+    return sel
+
+
+def _random_case(rng, ncand, nres, per):
+    owner = np.repeat(np.arange(ncand), rng.integers(1, per + 1, ncand))
+    res = rng.integers(0, nres, len(owner))
+    rank = rng.permutation(ncand) + 1
+    return owner, res, rank
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_greedy_independent_matches_the_batch_sub_rounds(seed):
+    rng = np.random.default_rng(seed)
+    ncand, nres = int(rng.integers(1, 3000)), int(rng.integers(1, 2000))
+    owner, res, rank = _random_case(rng, ncand, nres, int(rng.integers(1, 20)))
+    alive = rng.random(ncand) < 0.9
+    bad = rng.random(ncand) < 0.3            # winners the check turns down
+
+    def check(win):
+        return ~bad[win]
+
+    for max_sub in (1, 2, 3, 16):
+        ref = _batch_reference(owner, res, rank, nres, alive, check, max_sub)
+        got = greedy_independent(owner, res, rank, nres, alive=alive, check=check, max_sub=max_sub)
+        assert np.array_equal(got, ref), (seed, max_sub)
+    # ranks need not be 1..ncand: only their order counts
+    got = greedy_independent(owner, res, 7 * rank + 3, nres, alive=alive, check=check, max_sub=16)
+    assert np.array_equal(got, _batch_reference(owner, res, rank, nres, alive, check, 16))
+    # without a check: every winner is kept, no two kept candidates share a resource
+    got = greedy_independent(owner, res, rank, nres, max_sub=64)
+    assert np.array_equal(got, _batch_reference(owner, res, rank, nres, np.ones(ncand, bool),
+                                                lambda w: np.ones(len(w), bool), 64))
+    used = res[got[owner]]
+    pairs = np.unique(np.stack([owner[got[owner]], used], 1), axis=0)
+    assert len(np.unique(pairs[:, 1])) == len(pairs[:, 1])
+
+
+def test_greedy_independent_hands_the_check_each_sub_round_in_order():
+    # a chain of candidates sharing resources: 0-1 share r0, 1-2 share r1, ...; ranks rise along
+    # the chain, so the sub-rounds go from the top down, two candidates apart
+    n = 7
+    owner = np.repeat(np.arange(n), 2)
+    res = np.stack([np.arange(n) - 1, np.arange(n)], 1).reshape(-1)
+    keep = res >= 0
+    owner, res = owner[keep], res[keep]
+    rank = np.arange(n) + 1
+    seen = []
+
+    def check(win):
+        seen.append(win.tolist())
+        return win != 6                  # the top one is turned down: the next one wins instead
+
+    sel = greedy_independent(owner, res, rank, n, check=check, max_sub=16)
+    assert seen == [[6], [5], [3], [1]]
+    assert np.flatnonzero(sel).tolist() == [1, 3, 5]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_common_neighbour_counts_match_a_sort(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(2, 400))
+    e = np.unique(np.sort(rng.integers(0, n, (5 * n, 2)), 1), axis=0)
+    e = e[e[:, 0] != e[:, 1]]
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    o = np.argsort(src, kind="stable")
+    nptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(src, minlength=n), out=nptr[1:])
+    nbr = dst[o]
+    u, v = e[:, 0], e[:, 1]
+    ref = np.array([len(set(nbr[nptr[a]:nptr[a + 1]]) & set(nbr[nptr[b]:nptr[b + 1]])) for a, b in zip(u, v)],
+                   dtype=np.int64)
+    assert np.array_equal(common_neighbour_counts(nptr, nbr, u, v), ref)
