@@ -15,24 +15,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["greedy_independent", "common_neighbour_counts", "warm_up"]
+__all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "warm_up"]
 
 
 # ============================================================================ independent sets
 @njit(cache=True, nogil=True)
 def _build(owner, res, alive, rank, ncand, nres):
     """CSR of the entries of the live candidates: per candidate its resources (``cptr``,
-    ``cres``), per resource its candidates by falling rank (``rptr``, ``rcand``; filled
-    candidate by candidate from the highest rank down, so no list needs sorting)."""
+    ``cres``), per resource its candidates by falling rank (``rptr``, ``rcand``)."""
     ccnt = np.zeros(ncand + 1, np.int64)
-    rcnt = np.zeros(nres + 1, np.int64)
     for e in range(owner.shape[0]):
-        c = owner[e]
-        if alive[c]:
-            ccnt[c + 1] += 1
-            rcnt[res[e] + 1] += 1
+        if alive[owner[e]]:
+            ccnt[owner[e] + 1] += 1
     cptr = np.cumsum(ccnt)
-    rptr = np.cumsum(rcnt)
     cres = np.empty(cptr[ncand], np.int64)
     cfill = cptr[:ncand].copy()
     for e in range(owner.shape[0]):
@@ -40,7 +35,43 @@ def _build(owner, res, alive, rank, ncand, nres):
         if alive[c]:
             cres[cfill[c]] = res[e]
             cfill[c] += 1
-    by_rank = np.empty(ncand, np.int64)         # candidates, highest rank first
+    rptr, rcand = _by_resource(cptr, cres, rank, ncand, nres)
+    return cptr, cres, rptr, rcand
+
+
+@njit(cache=True, nogil=True)
+def _build_rings(nptr, nbr, u, v, alive, rank, ncand, nres):
+    """:func:`_build` for candidates whose resources are the neighbour lists of two
+    vertices ``u[c]`` and ``v[c]`` (CSR ``nptr``, ``nbr``), without listing the entries first."""
+    cptr = np.zeros(ncand + 1, np.int64)
+    for c in range(ncand):
+        k = 0
+        if alive[c]:
+            k = nptr[u[c] + 1] - nptr[u[c]] + nptr[v[c] + 1] - nptr[v[c]]
+        cptr[c + 1] = cptr[c] + k
+    cres = np.empty(cptr[ncand], np.int64)
+    for c in range(ncand):
+        if alive[c]:
+            k = cptr[c]
+            for p in range(nptr[u[c]], nptr[u[c] + 1]):
+                cres[k] = nbr[p]
+                k += 1
+            for p in range(nptr[v[c]], nptr[v[c] + 1]):
+                cres[k] = nbr[p]
+                k += 1
+    rptr, rcand = _by_resource(cptr, cres, rank, ncand, nres)
+    return cptr, cres, rptr, rcand
+
+
+@njit(cache=True, nogil=True)
+def _by_resource(cptr, cres, rank, ncand, nres):
+    """Per resource its candidates by falling rank (``rank``: 1..ncand), filled candidate by
+    candidate from the highest rank down, so no list needs sorting."""
+    rcnt = np.zeros(nres + 1, np.int64)
+    for k in range(cres.shape[0]):
+        rcnt[cres[k] + 1] += 1
+    rptr = np.cumsum(rcnt)
+    by_rank = np.empty(ncand, np.int64)
     for c in range(ncand):
         by_rank[ncand - rank[c]] = c
     rcand = np.empty(rptr[nres], np.int64)
@@ -51,7 +82,7 @@ def _build(owner, res, alive, rank, ncand, nres):
             r = cres[k]
             rcand[rfill[r]] = c
             rfill[r] += 1
-    return cptr, cres, rptr, rcand
+    return rptr, rcand
 
 
 @njit(cache=True, nogil=True)
@@ -122,36 +153,22 @@ def _next_wave(win, acc, cptr, cres, rtop, rptr, rcand, resolved, seen, wave):
     return np.sort(out[:no])
 
 
-def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_sub=12):
-    """Greedy maximal independent set of candidates over shared resources.
-
-    Candidate ``owner[i]`` uses resource ``res[i]`` (``0 <= res < nres``); ``rank`` is a unique
-    integer per candidate (higher first; 1..ncand is fastest); ``alive`` (bool per
-    candidate, default all) leaves the others out. Sub-round by sub-round (at most ``max_sub``), every candidate in play
-    that outranks every other candidate in play on each of its resources wins;
-    ``check(winners) -> bool array`` (default: all True) keeps some of them. A kept winner
-    takes its resources and every other candidate on them drops out; a winner not kept
-    just drops out. Returns the bool mask of the kept winners.
-
-    The same sets as running the sub-rounds on whole arrays (select the local maxima, drop
-    what touches a taken resource, repeat), but each entry is visited a bounded number of
-    times instead of once per sub-round."""
+def _dense_rank(rank):
+    """``rank`` as int64 1..n in the same order (unique ranks required)."""
     rank = np.ascontiguousarray(rank, dtype=np.int64)
-    ncand = len(rank)
-    sel = np.zeros(ncand, bool)
-    if not ncand:
-        return sel
-    if rank.min() != 1 or rank.max() != ncand or not np.bincount(rank, minlength=ncand + 1)[1:].all():
-        # not 1..ncand: the same order as dense ranks
-        dense = np.empty(ncand, np.int64)
-        dense[np.argsort(rank, kind="stable")] = np.arange(1, ncand + 1)
-        if len(np.unique(rank)) != ncand:
+    n = len(rank)
+    if n and (rank.min() != 1 or rank.max() != n or not np.bincount(rank, minlength=n + 1)[1:].all()):
+        if len(np.unique(rank)) != n:
             raise ValueError("greedy_independent needs a unique rank per candidate")
+        dense = np.empty(n, np.int64)
+        dense[np.argsort(rank, kind="stable")] = np.arange(1, n + 1)
         rank = dense
-    alive = np.ones(ncand, bool) if alive is None else np.ascontiguousarray(alive, dtype=np.bool_)
-    owner = np.ascontiguousarray(owner, dtype=np.int64)
-    res = np.ascontiguousarray(res, dtype=np.int64)
-    cptr, cres, rptr, rcand = _build(owner, res, alive, rank, ncand, int(nres))
+    return rank
+
+
+def _waves(cptr, cres, rptr, rcand, alive, check, max_sub):
+    ncand = len(alive)
+    sel = np.zeros(ncand, bool)
     rtop = rptr[:-1].copy()
     resolved = ~alive
     seen = np.full(ncand, -1, np.int64)
@@ -165,6 +182,51 @@ def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_su
             break
         win = _next_wave(win, good, cptr, cres, rtop, rptr, rcand, resolved, seen, wave)
     return sel
+
+
+def _alive(alive, ncand):
+    return np.ones(ncand, bool) if alive is None else np.ascontiguousarray(alive, dtype=np.bool_)
+
+
+def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_sub=12):
+    """Greedy maximal independent set of candidates over shared resources.
+
+    Candidate ``owner[i]`` uses resource ``res[i]`` (``0 <= res < nres``); ``rank`` is a unique
+    integer per candidate (higher first; 1..ncand is fastest); ``alive`` (bool per
+    candidate, default all) leaves the others out. Sub-round by sub-round (at most
+    ``max_sub``), every candidate in play that outranks every other candidate in play on
+    each of its resources wins; ``check(winners) -> bool array`` (default: all True) keeps
+    some of them. A kept winner takes its resources and every other candidate on them drops
+    out; a winner not kept just drops out. Returns the bool mask of the kept winners.
+
+    The same sets as running the sub-rounds on whole arrays (select the local maxima, drop
+    what touches a taken resource, repeat), but each entry is visited a bounded number of
+    times instead of once per sub-round."""
+    rank = _dense_rank(rank)
+    ncand = len(rank)
+    if not ncand:
+        return np.zeros(0, bool)
+    alive = _alive(alive, ncand)
+    cptr, cres, rptr, rcand = _build(np.ascontiguousarray(owner, dtype=np.int64),
+                                     np.ascontiguousarray(res, dtype=np.int64), alive, rank, ncand, int(nres))
+    return _waves(cptr, cres, rptr, rcand, alive, check, max_sub)
+
+
+def greedy_independent_rings(nptr, nbr, u, v, rank, *, alive=None, check=None, max_sub=12):
+    """:func:`greedy_independent` where candidate ``c`` uses the vertices of the neighbour
+    lists of ``u[c]`` and ``v[c]`` (graph CSR ``nptr``, ``nbr``; for an edge ``(u, v)`` the
+    closed 1-rings of both ends), without listing those entries in memory first."""
+    rank = _dense_rank(rank)
+    ncand = len(rank)
+    if not ncand:
+        return np.zeros(0, bool)
+    alive = _alive(alive, ncand)
+    cptr, cres, rptr, rcand = _build_rings(np.ascontiguousarray(nptr, dtype=np.int64),
+                                           np.ascontiguousarray(nbr, dtype=np.int64),
+                                           np.ascontiguousarray(u, dtype=np.int64),
+                                           np.ascontiguousarray(v, dtype=np.int64), alive, rank, ncand,
+                                           len(nptr) - 1)
+    return _waves(cptr, cres, rptr, rcand, alive, check, max_sub)
 
 
 # ============================================================================ topology
@@ -202,5 +264,6 @@ def warm_up() -> float:
     t0 = time.perf_counter()
     greedy_independent(np.array([0, 1, 1]), np.array([0, 0, 1]), np.array([1, 2]), 2,
                        check=lambda w: np.ones(len(w), bool), max_sub=3)
+    greedy_independent_rings(np.array([0, 1, 2]), np.array([1, 0]), np.array([0]), np.array([1]), np.array([1]))
     common_neighbour_counts(np.array([0, 1, 2]), np.array([1, 0]), np.array([0]), np.array([1]))
     return time.perf_counter() - t0

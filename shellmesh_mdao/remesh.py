@@ -38,7 +38,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import common_neighbour_counts, greedy_independent
+from .kernels import common_neighbour_counts, greedy_independent, greedy_independent_rings
 from .mesh import ShellMesh, cross_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -1242,6 +1242,13 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         k = len(a)
         okd = okd.copy()
         if not check_geometry:
+            if not okd.all():
+                # only the pairs the cheap tests allow (each pair's answer is its own)
+                out = np.full(k, np.inf)
+                keep = np.flatnonzero(okd)
+                if len(keep):
+                    out[keep] = geometric(a[keep], b[keep], okd[keep])
+                return out
             # only: no face around a may face against or stand across the input surface
             ow, pos = _expand(fptr, a)
             Fa = F[vf[pos]]
@@ -1316,14 +1323,21 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
 
     # ---- greedy independent set over lock regions (closed 1-rings of both ends),
     #      validating the winners of each sub-round geometrically
-    ow_u, pu = _expand(nptr, u)
-    ow_v, pv = _expand(nptr, v)
     acc_a, acc_b = [], []
 
     def check(win):
-        # both directions of every winner in one batch (u -> v first, then v -> u)
-        sc = geometric(np.concatenate([u[win], v[win]]), np.concatenate([v[win], u[win]]),
-                       np.concatenate([dir_ok[win, 0], dir_ok[win, 1]])).reshape(2, -1).T
+        if check_geometry:
+            # both directions of every winner in one batch (u -> v first, then v -> u)
+            sc = geometric(np.concatenate([u[win], v[win]]), np.concatenate([v[win], u[win]]),
+                           np.concatenate([dir_ok[win, 0], dir_ok[win, 1]])).reshape(2, -1).T
+        else:
+            # both directions score the edge's length: v -> u only where u -> v fails
+            s0 = geometric(u[win], v[win], dir_ok[win, 0])
+            s1 = np.full(len(win), np.inf)
+            redo = np.flatnonzero(~np.isfinite(s0))
+            if len(redo):
+                s1[redo] = geometric(v[win[redo]], u[win[redo]], dir_ok[win[redo], 1])
+            sc = np.stack([s0, s1], 1)
         good = np.isfinite(sc).any(1)
         if good.any():
             w, s = win[good], sc[good]
@@ -1332,8 +1346,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             acc_b.append(np.where(d == 0, v[w], u[w]))
         return good
 
-    greedy_independent(np.concatenate([ow_u, ow_v]), np.concatenate([nbr[pu], nbr[pv]]), _rank(prio, cand), n,
-                       alive=alive, check=check, max_sub=16)
+    greedy_independent_rings(nptr, nbr, u, v, _rank(prio, cand), alive=alive, check=check, max_sub=16)
     if not acc_a:
         return 0
     a = np.concatenate(acc_a)

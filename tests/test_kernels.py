@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from shellmesh_mdao.kernels import common_neighbour_counts, greedy_independent
+from shellmesh_mdao.kernels import common_neighbour_counts, greedy_independent, greedy_independent_rings
 
 
 def _batch_reference(owner, res, rank, nres, alive, check, max_sub):
@@ -91,6 +91,41 @@ def test_greedy_independent_hands_the_check_each_sub_round_in_order():
     sel = greedy_independent(owner, res, rank, n, check=check, max_sub=16)
     assert seen == [[6], [5], [3], [1]]
     assert np.flatnonzero(sel).tolist() == [1, 3, 5]
+
+
+def _random_graph(rng, n):
+    e = np.unique(np.sort(rng.integers(0, n, (3 * n, 2)), 1), axis=0)
+    e = e[e[:, 0] != e[:, 1]]
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    o = np.argsort(src, kind="stable")
+    nptr = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(src, minlength=n), out=nptr[1:])
+    return e, nptr, dst[o]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_greedy_independent_rings_matches_listed_entries(seed):
+    # the collapses' lock regions: an edge (u, v) uses the 1-rings of both ends
+    rng = np.random.default_rng(50 + seed)
+    n = int(rng.integers(3, 1500))
+    e, nptr, nbr = _random_graph(rng, n)
+    u, v = e[:, 0], e[:, 1]
+    cnt_u, cnt_v = np.diff(nptr)[u], np.diff(nptr)[v]
+    owner = np.concatenate([np.repeat(np.arange(len(e)), cnt_u), np.repeat(np.arange(len(e)), cnt_v)])
+    res = np.concatenate([np.concatenate([nbr[nptr[a]:nptr[a + 1]] for a in u] + [np.zeros(0, np.int64)]),
+                          np.concatenate([nbr[nptr[b]:nptr[b + 1]] for b in v] + [np.zeros(0, np.int64)])])
+    rank = rng.permutation(len(e)) + 1
+    alive = rng.random(len(e)) < 0.8
+    bad = rng.random(len(e)) < 0.25
+
+    def check(win):
+        return ~bad[win]
+
+    ref = _batch_reference(owner, res, rank, n, alive, check, 16)
+    got = greedy_independent_rings(nptr, nbr, u, v, rank, alive=alive, check=check, max_sub=16)
+    assert np.array_equal(got, ref)
+    assert got.sum() > 0
 
 
 @pytest.mark.parametrize("seed", range(6))
