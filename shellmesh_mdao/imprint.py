@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
+from .kernels import greedy_independent
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .section import Plane, SectionArc, section_arc
 
@@ -1473,36 +1474,19 @@ def _collapse_checks(P, T, C, ptr, star, ekeys, v, u):
 
 
 def _independent(ptr, star, v, u, m):
-    """Indices (into the priority-ordered candidates v -> u) of a greedy independent set: no
-    two chosen candidates touch a common face of the stars of v and u."""
-    take = []
-    order = np.arange(len(v))
-    taken = np.zeros(m, bool)
-    for _ in range(16):
-        if not len(order):
-            break
-        fa = star[_ranges(ptr[v[order]], ptr[v[order] + 1])]
-        fb = star[_ranges(ptr[u[order]], ptr[u[order] + 1])]
-        pa = np.repeat(np.arange(len(order)), ptr[v[order] + 1] - ptr[v[order]])
-        pb = np.repeat(np.arange(len(order)), ptr[u[order] + 1] - ptr[u[order]])
-        trs, pos = np.concatenate([fa, fb]), np.concatenate([pa, pb])
-        first = np.full(m, len(order))
-        np.minimum.at(first, trs, pos)
-        mine = (first[trs] == pos) & ~taken[trs]
-        win = np.bincount(pos, weights=~mine, minlength=len(order)) == 0
-        take.append(order[win])
-        taken[trs[win[pos]]] = True
-        order = order[~win]
-        # a loser can only win later if nothing it touches was taken
-        if len(order):
-            fa = star[_ranges(ptr[v[order]], ptr[v[order] + 1])]
-            fb = star[_ranges(ptr[u[order]], ptr[u[order] + 1])]
-            pa = np.repeat(np.arange(len(order)), ptr[v[order] + 1] - ptr[v[order]])
-            pb = np.repeat(np.arange(len(order)), ptr[u[order] + 1] - ptr[u[order]])
-            hit = np.bincount(np.concatenate([pa, pb]), weights=taken[np.concatenate([fa, fb])],
-                              minlength=len(order)) > 0
-            order = order[~hit]
-    return np.concatenate(take) if take else np.zeros(0, np.int64)
+    """Indices (sorted, into the priority-ordered candidates v -> u) of a greedy independent
+    set: no two chosen candidates touch a common face of the stars of v and u; earlier
+    candidates first (:func:`kernels.greedy_independent`, at most 16 sub-rounds)."""
+    k = len(v)
+    if not k:
+        return np.zeros(0, np.int64)
+    fa = star[_ranges(ptr[v], ptr[v + 1])]
+    fb = star[_ranges(ptr[u], ptr[u + 1])]
+    pa = np.repeat(np.arange(k), ptr[v + 1] - ptr[v])
+    pb = np.repeat(np.arange(k), ptr[u + 1] - ptr[u])
+    sel = greedy_independent(np.concatenate([pa, pb]), np.concatenate([fa, fb]), np.arange(k, 0, -1), m,
+                             max_sub=16)
+    return np.flatnonzero(sel)
 
 
 def _apply_collapses(P, T, C, fe, fid, fixed, chain_vs, v, u):
@@ -1627,7 +1611,7 @@ def coarsen_chains(mesh: ShellMesh, locator, chains, target: float, max_ratio: f
                 o = o[first]
                 o = o[np.lexsort((v[o], prio[o]))]
                 v, u, cix, pos, dv = v[o], u[o], cix[o], pos[o], dv[o]
-                win = np.sort(_independent(ptr, star, v, u, len(T)))
+                win = _independent(ptr, star, v, u, len(T))
                 if phase == 0:
                     for ci in np.unique(cix[win]).tolist():
                         oidx[ci] = np.delete(oidx[ci], pos[win[cix[win] == ci]])
