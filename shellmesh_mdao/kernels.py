@@ -184,8 +184,15 @@ def _waves(cptr, cres, rptr, rcand, alive, check, max_sub):
     return sel
 
 
-def _alive(alive, ncand):
-    return np.ones(ncand, bool) if alive is None else np.ascontiguousarray(alive, dtype=np.bool_)
+def _select(build, rank, alive, check, max_sub):
+    """Dense ranks, live mask, ``build(alive, rank, ncand)`` -> the CSR tables, then the waves."""
+    rank = _dense_rank(rank)
+    ncand = len(rank)
+    if not ncand:
+        return np.zeros(0, bool)
+    alive = np.ones(ncand, bool) if alive is None else np.ascontiguousarray(alive, dtype=np.bool_)
+    cptr, cres, rptr, rcand = build(alive, rank, ncand)
+    return _waves(cptr, cres, rptr, rcand, alive, check, max_sub)
 
 
 def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_sub=12):
@@ -202,31 +209,19 @@ def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_su
     The same sets as running the sub-rounds on whole arrays (select the local maxima, drop
     what touches a taken resource, repeat), but each entry is visited a bounded number of
     times instead of once per sub-round."""
-    rank = _dense_rank(rank)
-    ncand = len(rank)
-    if not ncand:
-        return np.zeros(0, bool)
-    alive = _alive(alive, ncand)
-    cptr, cres, rptr, rcand = _build(np.ascontiguousarray(owner, dtype=np.int64),
-                                     np.ascontiguousarray(res, dtype=np.int64), alive, rank, ncand, int(nres))
-    return _waves(cptr, cres, rptr, rcand, alive, check, max_sub)
+    owner = np.ascontiguousarray(owner, dtype=np.int64)
+    res = np.ascontiguousarray(res, dtype=np.int64)
+    return _select(lambda alive, rank, ncand: _build(owner, res, alive, rank, ncand, int(nres)),
+                   rank, alive, check, max_sub)
 
 
 def greedy_independent_rings(nptr, nbr, u, v, rank, *, alive=None, check=None, max_sub=12):
     """:func:`greedy_independent` where candidate ``c`` uses the vertices of the neighbour
     lists of ``u[c]`` and ``v[c]`` (graph CSR ``nptr``, ``nbr``; for an edge ``(u, v)`` the
     closed 1-rings of both ends), without listing those entries in memory first."""
-    rank = _dense_rank(rank)
-    ncand = len(rank)
-    if not ncand:
-        return np.zeros(0, bool)
-    alive = _alive(alive, ncand)
-    cptr, cres, rptr, rcand = _build_rings(np.ascontiguousarray(nptr, dtype=np.int64),
-                                           np.ascontiguousarray(nbr, dtype=np.int64),
-                                           np.ascontiguousarray(u, dtype=np.int64),
-                                           np.ascontiguousarray(v, dtype=np.int64), alive, rank, ncand,
-                                           len(nptr) - 1)
-    return _waves(cptr, cres, rptr, rcand, alive, check, max_sub)
+    nptr, nbr, u, v = (np.ascontiguousarray(x, dtype=np.int64) for x in (nptr, nbr, u, v))
+    return _select(lambda alive, rank, ncand: _build_rings(nptr, nbr, u, v, alive, rank, ncand, len(nptr) - 1),
+                   rank, alive, check, max_sub)
 
 
 # ============================================================================ topology

@@ -1236,6 +1236,15 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
     fn_old = _unit(_tri_normals(P, F))
     cos_turn = np.cos(np.radians(max_normal_turn))
 
+    def allowed_only(a, b, okd):
+        """:func:`geometric` run on the pairs ``okd`` allows only, inf for the others (they get
+        inf whatever the costly tests find; each pair's answer does not depend on the others)."""
+        out = np.full(len(a), np.inf)
+        keep = np.flatnonzero(okd)
+        if len(keep):
+            out[keep] = geometric(a[keep], b[keep], okd[keep])
+        return out
+
     def geometric(a, b, okd):
         """rmax (inf where invalid) of collapsing vertex ``a`` into ``b`` (arrays; ``okd``: the
         collapses the cheap tests allow), each pair on its own."""
@@ -1243,12 +1252,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         okd = okd.copy()
         if not check_geometry:
             if not okd.all():
-                # only the pairs the cheap tests allow (each pair's answer is its own)
-                out = np.full(k, np.inf)
-                keep = np.flatnonzero(okd)
-                if len(keep):
-                    out[keep] = geometric(a[keep], b[keep], okd[keep])
-                return out
+                return allowed_only(a, b, okd)
             # only: no face around a may face against or stand across the input surface
             ow, pos = _expand(fptr, a)
             Fa = F[vf[pos]]
@@ -1274,13 +1278,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         np.maximum.at(rmax, ow, r)
         okd &= rmax <= max_len_ratio
         if not okd.all():
-            # the costly tests below only for the pairs still allowed (the others get inf
-            # whatever they find); each pair's answer does not depend on the others in the batch
-            out = np.full(k, np.inf)
-            keep = np.flatnonzero(okd)
-            if len(keep):
-                out[keep] = geometric(a[keep], b[keep], okd[keep])
-            return out
+            return allowed_only(a, b, okd)
         ow, pos = _expand(fptr, a)
         ff = vf[pos]
         Fa = F[ff]

@@ -93,8 +93,9 @@ def test_greedy_independent_hands_the_check_each_sub_round_in_order():
     assert np.flatnonzero(sel).tolist() == [1, 3, 5]
 
 
-def _random_graph(rng, n):
-    e = np.unique(np.sort(rng.integers(0, n, (3 * n, 2)), 1), axis=0)
+def _random_graph(rng, n, per=3):
+    """Edges (unique, sorted pairs) and CSR neighbour lists of a random graph on n vertices."""
+    e = np.unique(np.sort(rng.integers(0, n, (per * n, 2)), 1), axis=0)
     e = e[e[:, 0] != e[:, 1]]
     src = np.concatenate([e[:, 0], e[:, 1]])
     dst = np.concatenate([e[:, 1], e[:, 0]])
@@ -132,14 +133,7 @@ def test_greedy_independent_rings_matches_listed_entries(seed):
 def test_common_neighbour_counts_match_a_sort(seed):
     rng = np.random.default_rng(100 + seed)
     n = int(rng.integers(2, 400))
-    e = np.unique(np.sort(rng.integers(0, n, (5 * n, 2)), 1), axis=0)
-    e = e[e[:, 0] != e[:, 1]]
-    src = np.concatenate([e[:, 0], e[:, 1]])
-    dst = np.concatenate([e[:, 1], e[:, 0]])
-    o = np.argsort(src, kind="stable")
-    nptr = np.zeros(n + 1, np.int64)
-    np.cumsum(np.bincount(src, minlength=n), out=nptr[1:])
-    nbr = dst[o]
+    e, nptr, nbr = _random_graph(rng, n, per=5)
     u, v = e[:, 0], e[:, 1]
     ref = np.array([len(set(nbr[nptr[a]:nptr[a + 1]]) & set(nbr[nptr[b]:nptr[b + 1]])) for a, b in zip(u, v)],
                    dtype=np.int64)
