@@ -7,8 +7,9 @@ entries of every candidate still in play. On a 1.5M-triangle input that was most
 remesh's time. Here the same result comes from one pass over the entries.
 
 The functions are compiled on first use and cached on disk next to this file (numba's
-``cache=True``; :func:`warm_up` does it ahead); every result is the same, bit for bit, as the numpy code it replaces
-(the tests compare the two).
+``cache=True``; :func:`warm_up` does it ahead). Every result is the same, bit for bit, as
+the numpy code it replaces (the tests compare the two). The compiled loops do not check
+bounds, so the Python wrappers check every index before handing it over.
 """
 from __future__ import annotations
 
@@ -167,6 +168,8 @@ def _dense_rank(rank):
 
 
 def _waves(cptr, cres, rptr, rcand, alive, check, max_sub):
+    """The sub-rounds: the first wave from a scan of all candidates, each next one from the
+    resources the last one resolved; ``check`` sees each wave's winners in increasing order."""
     ncand = len(alive)
     sel = np.zeros(ncand, bool)
     rtop = rptr[:-1].copy()
@@ -182,6 +185,18 @@ def _waves(cptr, cres, rptr, rcand, alive, check, max_sub):
             break
         win = _next_wave(win, good, cptr, cres, rtop, rptr, rcand, resolved, seen, wave)
     return sel
+
+
+def _check_index(name, a, n):
+    if len(a) and (a.min() < 0 or a.max() >= n):
+        raise ValueError(f"{name} holds indices outside [0, {n}): {int(a.min())}..{int(a.max())}")
+
+
+def _check_csr(nptr, nbr):
+    n = len(nptr) - 1
+    if n < 0 or (n and (nptr[0] != 0 or nptr[-1] != len(nbr) or (np.diff(nptr) < 0).any())):
+        raise ValueError("nptr must be CSR row pointers into nbr: start at 0, never decrease, end at len(nbr)")
+    _check_index("nbr", nbr, n)
 
 
 def _select(build, rank, alive, check, max_sub):
@@ -211,6 +226,10 @@ def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_su
     times instead of once per sub-round."""
     owner = np.ascontiguousarray(owner, dtype=np.int64)
     res = np.ascontiguousarray(res, dtype=np.int64)
+    _check_index("owner", owner, len(rank))
+    _check_index("res", res, int(nres))
+    if len(owner) != len(res):
+        raise ValueError(f"owner and res need one entry each per use, got {len(owner)} and {len(res)}")
     return _select(lambda alive, rank, ncand: _build(owner, res, alive, rank, ncand, int(nres)),
                    rank, alive, check, max_sub)
 
@@ -220,6 +239,11 @@ def greedy_independent_rings(nptr, nbr, u, v, rank, *, alive=None, check=None, m
     lists of ``u[c]`` and ``v[c]`` (graph CSR ``nptr``, ``nbr``; for an edge ``(u, v)`` the
     closed 1-rings of both ends), without listing those entries in memory first."""
     nptr, nbr, u, v = (np.ascontiguousarray(x, dtype=np.int64) for x in (nptr, nbr, u, v))
+    _check_csr(nptr, nbr)
+    _check_index("u", u, len(nptr) - 1)
+    _check_index("v", v, len(nptr) - 1)
+    if not len(u) == len(v) == len(rank):
+        raise ValueError(f"u, v and rank need one entry per candidate, got {len(u)}, {len(v)} and {len(rank)}")
     return _select(lambda alive, rank, ncand: _build_rings(nptr, nbr, u, v, alive, rank, ncand, len(nptr) - 1),
                    rank, alive, check, max_sub)
 
@@ -245,10 +269,13 @@ def _common(nptr, nbr, u, v, n):
 def common_neighbour_counts(nptr, nbr, u, v):
     """Number of common neighbours of ``u[i]`` and ``v[i]`` in the graph with CSR
     neighbour lists ``(nptr, nbr)`` (lists without repeats)."""
-    u = np.ascontiguousarray(u, dtype=np.int64)
-    v = np.ascontiguousarray(v, dtype=np.int64)
-    return _common(np.ascontiguousarray(nptr, dtype=np.int64), np.ascontiguousarray(nbr, dtype=np.int64),
-                   u, v, len(nptr) - 1)
+    nptr, nbr, u, v = (np.ascontiguousarray(x, dtype=np.int64) for x in (nptr, nbr, u, v))
+    _check_csr(nptr, nbr)
+    _check_index("u", u, len(nptr) - 1)
+    _check_index("v", v, len(nptr) - 1)
+    if len(u) != len(v):
+        raise ValueError(f"u and v need the same length, got {len(u)} and {len(v)}")
+    return _common(nptr, nbr, u, v, len(nptr) - 1)
 
 
 def warm_up() -> float:

@@ -138,3 +138,20 @@ def test_common_neighbour_counts_match_a_sort(seed):
     ref = np.array([len(set(nbr[nptr[a]:nptr[a + 1]]) & set(nbr[nptr[b]:nptr[b + 1]])) for a, b in zip(u, v)],
                    dtype=np.int64)
     assert np.array_equal(common_neighbour_counts(nptr, nbr, u, v), ref)
+
+
+def test_kernels_refuse_indices_out_of_range():
+    # the compiled loops do not check bounds: the wrappers must
+    with pytest.raises(ValueError, match="res holds indices outside"):
+        greedy_independent(np.array([0, 1]), np.array([0, 5]), np.array([1, 2]), 3)
+    with pytest.raises(ValueError, match="owner holds indices outside"):
+        greedy_independent(np.array([0, 2]), np.array([0, 1]), np.array([1, 2]), 3)
+    with pytest.raises(ValueError, match="unique rank"):
+        greedy_independent(np.array([0, 1]), np.array([0, 1]), np.array([4, 4]), 3)
+    nptr, nbr = np.array([0, 1, 2]), np.array([1, 0])
+    with pytest.raises(ValueError, match="v holds indices outside"):
+        greedy_independent_rings(nptr, nbr, np.array([0]), np.array([2]), np.array([1]))
+    with pytest.raises(ValueError, match="nbr holds indices outside"):
+        common_neighbour_counts(nptr, np.array([1, 7]), np.array([0]), np.array([1]))
+    with pytest.raises(ValueError, match="CSR row pointers"):
+        common_neighbour_counts(np.array([0, 3, 2]), nbr, np.array([0]), np.array([1]))
