@@ -70,14 +70,6 @@ def _dot(a, b):
     return np.einsum("ij,ij->i", a, b)
 
 
-def _independent(owner, res, rank, nres, max_sub=12):
-    """Greedy maximal independent set of candidates: candidate ``owner[i]`` uses resource
-    ``res[i]``; two selected candidates never share a resource. Each sub-round selects
-    the candidates of highest ``rank`` among all candidates sharing a resource with them,
-    then drops everything touching a selected resource (:func:`kernels.greedy_independent`)."""
-    return greedy_independent(owner, res, rank, nres, max_sub=max_sub)
-
-
 def _tri_normals(P, F):
     """Unnormalised normals (twice the area vectors) of triangles ``F``."""
     return cross_rows(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
@@ -1032,7 +1024,7 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
     v1 = f1 >= 0
     owner = np.concatenate([np.arange(len(cand)), np.flatnonzero(v1)])
     res = np.concatenate([f0, f1[v1]])
-    win = _independent(owner, res, rank, len(W.F))
+    win = greedy_independent(owner, res, rank, len(W.F))
     sel = cand[win]
     f0, f1 = f0[win], f1[win]
     isf, ech = W.feature_lookup(T)
@@ -1454,10 +1446,10 @@ def _flip_round(W, ctx, mode):
     if mode == "valence":
         # valence gains assume the neighbours keep their valence: lock all four vertices
         quad = np.stack([a[sel], b[sel], c[sel], d[sel]], 1)
-        win = _independent(np.repeat(np.arange(len(sel)), 4), quad.reshape(-1), rank, W.n)
+        win = greedy_independent(np.repeat(np.arange(len(sel)), 4), quad.reshape(-1), rank, W.n)
     else:
-        win = _independent(np.repeat(np.arange(len(sel)), 2), np.stack([f0[sel], f1[sel]], 1).reshape(-1),
-                           rank, len(F))
+        win = greedy_independent(np.repeat(np.arange(len(sel)), 2),
+                                 np.stack([f0[sel], f1[sel]], 1).reshape(-1), rank, len(F))
     sel, rank = sel[win], rank[win]
     # two flips of the batch must not create the same edge
     lo = np.minimum(c[sel], d[sel])
