@@ -16,7 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "warm_up"]
+__all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
+           "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -277,6 +278,90 @@ def common_neighbour_counts(nptr, nbr, u, v):
         raise ValueError(f"u and v need the same length, got {len(u)} and {len(v)}")
     return _common(nptr, nbr, u, v, len(nptr) - 1)
 
+# ============================================================================ smoothing
+@njit(cache=True, nogil=True)
+def _ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv):
+    m = a.shape[0]
+    indptr = np.zeros(3 * m + 1, np.int64)
+    for q in range(m):
+        cnt = ncol[a[q]] + ncol[b[q]] + ncol[c[q]]
+        for d in range(3):
+            indptr[3 * q + d + 1] = indptr[3 * q + d] + cnt
+    nnz = indptr[3 * m]
+    data = np.empty(nnz, np.float64)
+    indices = np.empty(nnz, np.int64)
+    vs = np.empty(3, np.int64)
+    order = np.empty(3, np.int64)
+    vec = np.empty(3, np.float64)
+    for q in range(m):
+        vs[0], vs[1], vs[2] = a[q], b[q], c[q]
+        # the three roles in order of their first column (each vertex owns a contiguous
+        # range): a stable sort of three keys
+        order[0], order[1], order[2] = 0, 1, 2
+        for i in range(1, 3):
+            j = i
+            while j > 0 and col_start[vs[order[j - 1]]] > col_start[vs[order[j]]]:
+                order[j - 1], order[j] = order[j], order[j - 1]
+                j -= 1
+        k = 0
+        for o in range(3):
+            role = order[o]
+            v = vs[role]
+            for jc in range(ncol[v]):
+                col = col_start[v] + jc
+                t0, t1, t2 = tv[col, 0], tv[col, 1], tv[col, 2]
+                if role == 0:
+                    vec[0], vec[1], vec[2] = su[q] * t0, su[q] * t1, su[q] * t2
+                else:
+                    n0, n1, n2 = n[q, 0], n[q, 1], n[q, 2]
+                    x0 = n1 * t2 - n2 * t1
+                    x1 = n2 * t0 - n0 * t2
+                    x2 = n0 * t1 - n1 * t0
+                    if role == 1:
+                        vec[0] = -su[q] * t0 + sv[q] * x0
+                        vec[1] = -su[q] * t1 + sv[q] * x1
+                        vec[2] = -su[q] * t2 + sv[q] * x2
+                    else:
+                        vec[0], vec[1], vec[2] = -sv[q] * x0, -sv[q] * x1, -sv[q] * x2
+                for d in range(3):
+                    p = indptr[3 * q + d] + k
+                    data[p] = vec[d] * sw[q]
+                    indices[p] = col
+                k += 1
+    return data, indices, indptr
+
+
+def ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv):
+    """Jacobian of the quad-corner orthogonality residuals (:class:`~shellmesh_mdao.smooth._Ortho`)
+    in reduced coordinates, as CSR arrays ``(data, indices, indptr)`` of shape ``(3 m, k)``.
+
+    Corner ``q`` has previous, own and next vertex ``a[q]``, ``b[q]``, ``c[q]``, unit quad
+    normal ``n[q]``, inverse arm lengths ``su[q]``, ``sv[q]`` and weight root ``sw[q]``; its
+    residual is ``M_a a + M_b b + M_c c`` with ``M_a = su I``, ``M_b = -su I + sv [n]x``,
+    ``M_c = -sv [n]x``. Vertex ``v`` owns the reduced columns ``col_start[v] ..
+    col_start[v] + ncol[v] - 1`` with tangent vectors ``tv`` (k, 3). Rows ``3 q .. 3 q + 2``
+    hold ``M_role @ tv[col] * sw[q]`` for every column of the three vertices, columns sorted
+    (the canonical CSR that scipy builds from the same entries, value for value)."""
+    a, b, c = (np.ascontiguousarray(x, dtype=np.int64) for x in (a, b, c))
+    col_start = np.ascontiguousarray(col_start, dtype=np.int64)
+    ncol = np.ascontiguousarray(ncol, dtype=np.int64)
+    tv = np.ascontiguousarray(tv, dtype=np.float64).reshape(-1, 3)
+    nv = len(col_start)
+    for name, x in (("a", a), ("b", b), ("c", c)):
+        _check_index(name, x, nv)
+    if len(ncol) != nv or (len(ncol) and (ncol.min() < 0 or ncol.max() > 3)):
+        raise ValueError("ncol must give 0 to 3 columns for each vertex of col_start")
+    own = ncol > 0
+    if own.any() and (col_start[own].min() < 0 or (col_start + ncol)[own].max() > len(tv)):
+        raise ValueError(f"the columns of col_start/ncol must lie in 0..{len(tv) - 1} (rows of tv)")
+    m = len(a)
+    if len(b) != m or len(c) != m:
+        raise ValueError("a, b and c must have one entry per corner")
+    f = [np.ascontiguousarray(x, dtype=np.float64).reshape(-1) for x in (su, sv, sw)]
+    n = np.ascontiguousarray(n, dtype=np.float64).reshape(-1, 3)
+    if len(n) != m or any(len(x) != m for x in f):
+        raise ValueError("n, su, sv and sw must have one entry per corner")
+    return _ortho_jacobian(a, b, c, n, f[0], f[1], f[2], col_start, ncol, tv)
 
 def warm_up() -> float:
     """Compile every kernel (or load it from numba's cache) on a tiny input; returns the
@@ -288,4 +373,6 @@ def warm_up() -> float:
                        check=lambda w: np.ones(len(w), bool), max_sub=3)
     greedy_independent_rings(np.array([0, 1, 2]), np.array([1, 0]), np.array([0]), np.array([1]), np.array([1]))
     common_neighbour_counts(np.array([0, 1, 2]), np.array([1, 0]), np.array([0]), np.array([1]))
+    ortho_jacobian(np.array([0]), np.array([1]), np.array([2]), np.array([[0.0, 0.0, 1.0]]), np.ones(1),
+                   np.ones(1), np.ones(1), np.array([0, 2, 4]), np.array([2, 2, 0]), np.eye(3)[[0, 1, 0, 1]])
     return time.perf_counter() - t0

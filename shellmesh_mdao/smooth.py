@@ -948,14 +948,6 @@ class _Ortho:
         self.sv = np.divide(1.0, lv, out=np.zeros_like(lv), where=ok)
         self.w = np.where(ok, scale * np.sqrt(lu_ * lv), 0.0)
 
-    def _apply(self, role, t, sel):
-        """M_role @ t for the corners ``sel``, (k, 3) vectors t (one per corner)."""
-        su, sv = self.su[sel, None], self.sv[sel, None]
-        if role == 0:
-            return su * t
-        nx = cross_rows(self.n[sel], t)
-        return -su * t + sv * nx if role == 1 else -sv * nx
-
     def gradient(self, x, n):
         """(n, 3) gradient of 1/2 sum w |r|^2 at positions x."""
         r = self.su[:, None] * (x[self.a] - x[self.b]) - self.sv[:, None] * cross_rows(self.n, x[self.c] - x[self.b])
@@ -980,25 +972,14 @@ class _Ortho:
 
     def hessian(self, col_start, ncol, tv, k):
         """Hessian J_T^T W J_T in the reduced coordinates: vertex v owns columns
-        ``col_start[v] .. col_start[v] + ncol[v] - 1`` with tangent vectors ``tv`` (k, 3)."""
+        ``col_start[v] .. col_start[v] + ncol[v] - 1`` with tangent vectors ``tv`` (k, 3).
+        The Jacobian is built by a compiled loop (:func:`~shellmesh_mdao.kernels.ortho_jacobian`)."""
+        from .kernels import ortho_jacobian
         m = len(self.b)
-        rows, cols, vals = [], [], []
-        rr = 3 * np.arange(m)
-        sw = np.sqrt(self.w)[:, None]
-        for role, v in enumerate((self.a, self.b, self.c)):
-            for jc in range(3):
-                sel = np.flatnonzero(ncol[v] > jc)
-                if not len(sel):
-                    continue
-                col = col_start[v[sel]] + jc
-                vec = self._apply(role, tv[col], sel) * sw[sel]
-                rows.append((rr[sel][:, None] + np.arange(3)).ravel())
-                cols.append(np.repeat(col, 3))
-                vals.append(vec.ravel())
-        if not rows:
+        if not m or not (np.asarray(ncol) > 0).any():
             return sparse.csr_matrix((k, k))
-        J = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                              shape=(3 * m, k))
+        J = sparse.csr_matrix(ortho_jacobian(self.a, self.b, self.c, self.n, self.su, self.sv, np.sqrt(self.w),
+                                             col_start, ncol, tv), shape=(3 * m, k))
         return (J.T @ J).tocsr()
 
 

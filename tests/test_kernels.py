@@ -2,7 +2,10 @@
 import numpy as np
 import pytest
 
-from shellmesh_mdao.kernels import common_neighbour_counts, greedy_independent, greedy_independent_rings
+from scipy import sparse
+
+from shellmesh_mdao.kernels import common_neighbour_counts, greedy_independent, greedy_independent_rings, ortho_jacobian
+from shellmesh_mdao.mesh import cross_rows
 
 
 def _batch_reference(owner, res, rank, nres, alive, check, max_sub):
@@ -140,6 +143,69 @@ def test_common_neighbour_counts_match_a_sort(seed):
     assert np.array_equal(common_neighbour_counts(nptr, nbr, u, v), ref)
 
 
+def _ortho_reference(a, b, c, n, su, sv, sw, col_start, ncol, tv):
+    """The whole-array assembly the kernel replaced: COO entries per role and tangent column,
+    summed into CSR by scipy."""
+    m, k = len(a), len(tv)
+    rows, cols, vals = [], [], []
+    rr = 3 * np.arange(m)
+    for role, v in enumerate((a, b, c)):
+        for jc in range(3):
+            sel = np.flatnonzero(ncol[v] > jc)
+            if not len(sel):
+                continue
+            col = col_start[v[sel]] + jc
+            t, s_u, s_v = tv[col], su[sel, None], sv[sel, None]
+            nx = cross_rows(n[sel], t)
+            vec = s_u * t if role == 0 else (-s_u * t + s_v * nx if role == 1 else -s_v * nx)
+            rows.append((rr[sel][:, None] + np.arange(3)).ravel())
+            cols.append(np.repeat(col, 3))
+            vals.append((vec * sw[sel, None]).ravel())
+    return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * m, k))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_ortho_jacobian_matches_the_scipy_assembly(seed):
+    rng = np.random.default_rng(200 + seed)
+    nv = int(rng.integers(4, 300))
+    ncol = rng.integers(0, 4, nv)                    # fixed, curve, plane/surface, free vertices
+    ncol[rng.permutation(nv)[:3]] = 3
+    col_start = np.concatenate([[0], np.cumsum(ncol)[:-1]])
+    k = int(ncol.sum())
+    if seed % 2:                                      # columns not in vertex order
+        perm = rng.permutation(nv)
+        start = np.concatenate([[0], np.cumsum(ncol[perm])[:-1]])
+        col_start = np.empty(nv, np.int64)
+        col_start[perm] = start
+    m = int(rng.integers(1, 500))
+    abc = np.array([rng.choice(nv, 3, replace=False) for _ in range(m)])
+    a, b, c = abc.T
+    n = rng.normal(size=(m, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    su, sv, sw = rng.uniform(0.1, 3.0, (3, m))
+    su[::7] = 0.0                                     # a corner with a zero-length arm
+    tv = rng.normal(size=(k, 3))
+    data, indices, indptr = ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv)
+    ref = _ortho_reference(a, b, c, n, su, sv, sw, col_start, ncol, tv)
+    assert ref.has_sorted_indices
+    assert np.array_equal(indptr, ref.indptr)
+    assert np.array_equal(indices, ref.indices)
+    assert np.array_equal(data, ref.data)            # the same bits, so the same Hessian and solve
+
+
+def test_ortho_jacobian_of_a_right_angle_is_zero():
+    # unit square corner b=(0,0,0), a=(0,1,0) before it, c=(1,0,0) after it, normal +z:
+    # r = (a-b)/|a-b| - n x (c-b)/|c-b| = (0,1,0) - (0,1,0) = 0 at this position, and J x = r
+    P = np.array([[0.0, 1, 0], [0, 0, 0], [1, 0, 0]])
+    col_start, ncol = np.array([0, 3, 6]), np.array([3, 3, 3])
+    data, indices, indptr = ortho_jacobian([0], [1], [2], [[0.0, 0, 1]], [1.0], [1.0], [1.0], col_start, ncol,
+                                           np.tile(np.eye(3), (3, 1)))
+    J = sparse.csr_matrix((data, indices, indptr), shape=(3, 9))
+    assert np.allclose(J @ P.ravel(), 0.0)
+    # c moved to (1, 0.5, 0): n x c = (-0.5, 1, 0), so r = (0.5, 0, 0)
+    assert np.allclose(J @ np.array([[0.0, 1, 0], [0, 0, 0], [1, 0.5, 0]]).ravel(), [0.5, 0, 0])
+
+
 def test_kernels_refuse_indices_out_of_range():
     # the compiled loops do not check bounds: the wrappers must
     with pytest.raises(ValueError, match="res holds indices outside"):
@@ -155,3 +221,8 @@ def test_kernels_refuse_indices_out_of_range():
         common_neighbour_counts(nptr, np.array([1, 7]), np.array([0]), np.array([1]))
     with pytest.raises(ValueError, match="CSR row pointers"):
         common_neighbour_counts(np.array([0, 3, 2]), nbr, np.array([0]), np.array([1]))
+    one = np.ones(1)
+    with pytest.raises(ValueError, match="c holds indices outside"):
+        ortho_jacobian([0], [1], [3], [[0.0, 0, 1]], one, one, one, [0, 1, 2], [1, 1, 1], np.eye(3))
+    with pytest.raises(ValueError, match="rows of tv"):
+        ortho_jacobian([0], [1], [2], [[0.0, 0, 1]], one, one, one, [0, 1, 2], [1, 1, 2], np.eye(3))
