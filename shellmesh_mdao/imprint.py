@@ -79,6 +79,50 @@ def closest_on_polyline(q: np.ndarray, poly: np.ndarray, closed: bool = False) -
     return _closest_on_segments(q, p[:-1], p[1:])[0]
 
 
+def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs) -> np.ndarray:
+    """Closest point of each query ``q[i]`` on the arc ``arcs[cid[i]]``: the same points, bit
+    for bit, as :func:`closest_on_polyline` arc by arc, in one query. The segment midpoints
+    of all arcs go in one KD-tree with the arc's index times a separation far larger than
+    the model as a fourth coordinate, so a query meets only its own arc's segments (at their
+    plain distance); its candidates lie within the nearest midpoint's distance plus half its
+    arc's longest segment, as in :func:`_closest_on_segments`, and the nearest candidate wins
+    (ties: the lowest segment)."""
+    q = np.asarray(q, float).reshape(-1, 3)
+    cid = np.asarray(cid, np.int64)
+    ids = np.unique(cid)
+    pos = np.full(len(arcs), -1, np.int64)
+    pos[ids] = np.arange(len(ids))
+    ends = [np.vstack([arcs[c].points, arcs[c].points[:1]]) if arcs[c].closed else arcs[c].points for c in ids]
+    nseg = np.array([len(p) - 1 for p in ends], np.int64)
+    a = np.concatenate([p[:-1] for p in ends])
+    b = np.concatenate([p[1:] for p in ends])
+    ab = b - a
+    L = norm_rows(ab, axis=1)
+    seg_arc = np.repeat(np.arange(len(ids)), nseg)
+    Lmax = np.zeros(len(ids))
+    np.maximum.at(Lmax, seg_arc, L)
+    mid = 0.5 * (a + b)
+    sep = 1e3 * (float(np.abs(mid).max()) + float(np.abs(q).max()) + float(L.max()) + 1.0)
+    tree = cKDTree(np.column_stack([mid, seg_arc * sep]))
+    qa = pos[cid]
+    q4 = np.column_stack([q, qa * sep])
+    d0, _ = tree.query(q4)
+    cand = tree.query_ball_point(q4, d0 + 0.5 * Lmax[qa] + 1e-300)
+    cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
+    qi = np.repeat(np.arange(len(q)), cnt)
+    si = np.concatenate([np.asarray(c, np.int64) for c in cand])
+    keep = seg_arc[si] == qa[qi]
+    qi, si = qi[keep], si[keep]
+    L2 = np.einsum("ij,ij->i", ab[si], ab[si])
+    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    x = a[si] + t[:, None] * ab[si]
+    dist = norm_rows(x - q[qi], axis=1)
+    order = np.lexsort((si, dist, qi))
+    first = np.ones(len(order), bool)
+    first[1:] = qi[order][1:] != qi[order][:-1]
+    return x[order[first]]
+
+
 def _tri_angles_min(P, T):
     """Smallest interior angle (degrees) of each triangle ``P[T]``."""
     return _angles3(P[np.asarray(T)[:, :3]])
@@ -118,10 +162,12 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
     insert_point.last_split = None
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
     cen = (a + b + c) / 3
-    # candidate triangles: nearest centroids, then exact point-triangle distance
+    # candidate triangles: the 32 nearest centroids (nearest first; one point, so a plain
+    # scan beats building a tree), then exact point-triangle distance
     k = min(32, len(T))
-    _, cand = cKDTree(cen).query(x, k=k)
-    cand = np.atleast_1d(cand)
+    d2 = ((cen - x) ** 2).sum(1)
+    cand = np.argpartition(d2, k - 1)[:k] if k < len(T) else np.arange(len(T))
+    cand = cand[np.argsort(d2[cand], kind="stable")]
     bary, dist = _point_tri(x, a[cand], b[cand], c[cand])
     j = int(np.argmin(dist))
     f = int(cand[j])
@@ -1272,9 +1318,9 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     if len(surf):
         new[surf] = locator.closest(new[surf])[0]
     if chain_of is not None:
-        for cid in np.unique(chain_of[cand][chain_of[cand] >= 0]):
-            vv = cand[chain_of[cand] == cid]
-            new[vv] = closest_on_polyline(new[vv], arcs[cid].points, arcs[cid].closed)
+        vv = cand[chain_of[cand] >= 0]
+        if len(vv):
+            new[vv] = _closest_on_arcs(new[vv], chain_of[vv], arcs)
     # evaluate each vertex's star with only that vertex moved
     Tm = T[tris]
     which = Tm == rows[:, None]

@@ -432,3 +432,33 @@ def test_bridge_across_a_nose_is_flipped_not_split():
     n = np.cross(out.points[out.faces[:, 1]] - out.points[out.faces[:, 0]],
                  out.points[out.faces[:, 2]] - out.points[out.faces[:, 0]])
     assert (n[:, 2] > 0).all() and out.check().ok
+
+
+def test_closest_on_arcs_matches_one_arc_at_a_time():
+    # the smoothing round projects every chain vertex in one query: it must give the same
+    # points, bit for bit, as projecting arc by arc (the meshes depend on it)
+    from types import SimpleNamespace
+
+    from shellmesh_mdao.imprint import _closest_on_arcs
+
+    rng = np.random.default_rng(5)
+    arcs = []
+    for i in range(7):
+        th = np.sort(rng.uniform(0, 2 * np.pi, int(rng.integers(3, 60))))
+        r = rng.uniform(0.5, 2.0)
+        pts = np.column_stack([r * np.cos(th), r * np.sin(th), np.full(len(th), 0.3 * i)]) + rng.normal(0, 0.01, 3)
+        arcs.append(SimpleNamespace(points=pts, closed=bool(i % 2)))
+    cid = rng.choice([0, 2, 3, 5, 6], 400)
+    q = rng.normal(0, 1.5, (400, 3))
+    q[:20] = arcs[0].points[0]                        # queries on a vertex: tied segments
+    cid[:20] = 0
+    got = _closest_on_arcs(q, cid, arcs)
+    ref = np.empty_like(q)
+    for c in np.unique(cid):
+        ref[cid == c] = closest_on_polyline(q[cid == c], arcs[c].points, arcs[c].closed)
+    assert np.array_equal(got, ref)
+    # and each answer lies on its own arc, no farther than any of that arc's vertices
+    for c in np.unique(cid):
+        d = np.linalg.norm(got[cid == c] - q[cid == c], axis=1)
+        dv = np.linalg.norm(q[cid == c][:, None] - arcs[c].points[None], axis=2).min(1)
+        assert (d <= dv + 1e-12).all()
