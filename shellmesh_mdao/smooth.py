@@ -63,6 +63,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
+from .kernels import closest_on_curves
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -78,6 +79,9 @@ _NDOF = np.array([0, 1, 2, 2], dtype=np.int64)
 #: Jacobi-preconditioned CG above (splu's fill-in grows fast on surface meshes: 0.25 s at
 #: 20k unknowns, 2.7 s at 51k, against about 0.2 s for a CG solve at 51k).
 AUTO_LU_MAX_UNKNOWNS = 20000
+#: curves of at most this many segments are scanned whole by :meth:`CurveSet.closest` (a
+#: compiled loop); longer ones go through its KD-tree of segment midpoints (same answers)
+SCAN_SEGMENTS = 512
 _TRI_SJ = 2.0 / math.sqrt(3.0)
 
 
@@ -180,10 +184,13 @@ class CurveSet:
     larger than the curves' extent, so a query ``(x, c * sep)`` meets the segments of its own
     curve at their plain distance; candidates of other curves are dropped, and a query whose
     nearest midpoint is not on its own curve (one farther than ``sep`` from it) is answered by
-    its curve alone."""
+    its curve alone. Queries on curves of at most :data:`SCAN_SEGMENTS` segments skip the
+    tree: a compiled loop (:func:`~shellmesh_mdao.kernels.closest_on_curves`) scans all the
+    segments of the query's curve, with the same rule and the same arithmetic."""
 
     def __init__(self, curves):
         self.curves = list(curves)
+        self._a = None
         self._tree = None
 
     def _build(self):
@@ -193,6 +200,10 @@ class CurveSet:
         self._ab = np.concatenate([c._ab for c in cs])
         self._L = np.concatenate([c._L for c in cs])
         self._Lmax = np.array([c._L.max() for c in cs])
+        self._nseg = np.array([len(c._L) for c in cs], np.int64)
+        self._start = np.concatenate([[0], np.cumsum(self._nseg)[:-1]]).astype(np.int64)
+
+    def _build_tree(self):
         mid = self._a + 0.5 * self._ab
         self._sep = 1e3 * (float(np.abs(mid).max()) + float(self._L.max()) + 1.0)
         self._tree = cKDTree(np.column_stack([mid, self._cid * self._sep]))
@@ -204,12 +215,24 @@ class CurveSet:
         k = len(q)
         if not k:
             return np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-        if self._tree is None:
+        if self._a is None:
             self._build()
+        X, D, T = np.zeros((k, 3)), np.zeros(k), np.zeros((k, 3))
+        # curves of up to SCAN_SEGMENTS segments: every segment is scanned by a compiled loop
+        # (the nearest, then the lowest segment: what the candidates below give, bit for bit)
+        scan = self._nseg[cid] <= SCAN_SEGMENTS
+        if scan.any():
+            rows = np.flatnonzero(scan)
+            X[rows], D[rows], S = closest_on_curves(q[rows], cid[rows], self._start, self._start + self._nseg,
+                                                    self._a, self._ab, self._L)
+            T[rows] = self._ab[S] / self._L[S, None]
+            if scan.all():
+                return X, D, T
+        if self._tree is None:
+            self._build_tree()
         q4 = np.column_stack([q, cid * self._sep])
         d0, i0 = self._tree.query(q4)
-        own = self._cid[i0] == cid
-        X, D, T = np.zeros((k, 3)), np.zeros(k), np.zeros((k, 3))
+        own = (self._cid[i0] == cid) & ~scan
         if own.any():
             rows = np.flatnonzero(own)
             radius = d0[rows] + 0.5 * self._Lmax[cid[rows]] * (1 + 1e-9) + 1e-300
@@ -217,8 +240,9 @@ class CurveSet:
             qi = np.repeat(np.arange(len(rows)), cnt)
             keep = self._cid[si] == cid[rows][qi]
             X[rows], D[rows], T[rows] = _pick_nearest(q[rows], qi[keep], si[keep], self._a, self._ab, self._L)
-        for c in np.unique(cid[~own]).tolist():
-            rows = np.flatnonzero(~own & (cid == c))
+        rest = ~own & ~scan
+        for c in np.unique(cid[rest]).tolist():
+            rows = np.flatnonzero(rest & (cid == c))
             X[rows], D[rows], T[rows] = self.curves[c].closest(q[rows])
         return X, D, T
 

@@ -25,7 +25,7 @@ from shellmesh_mdao.errors import ProjectionError
 from shellmesh_mdao.imprint import chain_specs, imprint_chains
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.members import _split_thin_chain_edges
-from shellmesh_mdao.project import SurfaceLocator, project_layout, project_wing_stations
+from shellmesh_mdao.project import project_layout, project_wing_stations
 from shellmesh_mdao.quality import element_quality
 
 from test_pipeline import check_guarantees

@@ -4,7 +4,8 @@ import pytest
 
 from scipy import sparse
 
-from shellmesh_mdao.kernels import common_neighbour_counts, greedy_independent, greedy_independent_rings, ortho_jacobian
+from shellmesh_mdao.kernels import (closest_on_curves, common_neighbour_counts, greedy_independent,
+                                    greedy_independent_rings, ortho_jacobian)
 from shellmesh_mdao.mesh import cross_rows
 
 
@@ -206,6 +207,38 @@ def test_ortho_jacobian_of_a_right_angle_is_zero():
     assert np.allclose(J @ np.array([[0.0, 1, 0], [0, 0, 0], [1, 0.5, 0]]).ravel(), [0.5, 0, 0])
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_closest_on_curves_matches_the_numpy_pick(seed):
+    # every segment of each query's curve as candidates of smooth._pick_nearest: the same
+    # points, distances (bits, signs of zero) and segments, at scales from 1e-3 to 1e3,
+    # with queries on vertices (two segments tie) and a zero-length segment (NaN, never picked)
+    from shellmesh_mdao.smooth import _pick_nearest
+    rng = np.random.default_rng(300 + seed)
+    nc = int(rng.integers(1, 6))
+    lens = rng.integers(1, 40, nc)
+    start = np.concatenate([[0], np.cumsum(lens)[:-1]])
+    stop = start + lens
+    scale = 10.0 ** rng.uniform(-3, 3)
+    pts = [np.cumsum(rng.normal(size=(n + 1, 3)) * scale, 0) + rng.normal(size=3) * scale for n in lens]
+    a = np.concatenate([p[:-1] for p in pts])
+    ab = np.concatenate([p[1:] for p in pts]) - a
+    if seed % 2:
+        ab[start[-1]] = 0.0
+    L = np.sqrt(np.einsum("ij,ij->i", ab, ab))
+    k = 300
+    cid = rng.integers(0, nc, k)
+    q = a[rng.integers(0, len(a), k)] + rng.normal(size=(k, 3)) * scale * 10.0 ** rng.uniform(-6, 1, (k, 1))
+    q[:20] = a[np.minimum(start[cid[:20]] + 1, stop[cid[:20]] - 1)]
+    qi = np.repeat(np.arange(k), lens[cid])
+    si = np.concatenate([np.arange(start[c], stop[c]) for c in cid])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        X, D, _ = _pick_nearest(q, qi, si, a, ab, L)
+        x, d, seg = closest_on_curves(q, cid, start, stop, a, ab, L)
+    assert np.array_equal(x, X) and np.array_equal(d, D)
+    assert np.array_equal(np.signbit(x), np.signbit(X))
+    assert ((seg >= start[cid]) & (seg < stop[cid])).all() and np.isfinite(d).all()
+
+
 def test_kernels_refuse_indices_out_of_range():
     # the compiled loops do not check bounds: the wrappers must
     with pytest.raises(ValueError, match="res holds indices outside"):
@@ -226,3 +259,7 @@ def test_kernels_refuse_indices_out_of_range():
         ortho_jacobian([0], [1], [3], [[0.0, 0, 1]], one, one, one, [0, 1, 2], [1, 1, 1], np.eye(3))
     with pytest.raises(ValueError, match="rows of tv"):
         ortho_jacobian([0], [1], [2], [[0.0, 0, 1]], one, one, one, [0, 1, 2], [1, 1, 2], np.eye(3))
+    with pytest.raises(ValueError, match="cid holds indices outside"):
+        closest_on_curves(np.zeros((1, 3)), [1], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [1.0])
+    with pytest.raises(ValueError, match="segment range"):
+        closest_on_curves(np.zeros((1, 3)), [0], [0], [2], np.zeros((1, 3)), np.ones((1, 3)), [1.0])

@@ -208,18 +208,25 @@ def test_curve_and_polylines():
     assert got == [((0, 1, 2), False), ((2, 3), False), ((2, 4), False), ((5, 6, 7), True)]
 
 
-def test_curve_set_matches_each_curve_bit_for_bit():
+@pytest.mark.parametrize("scan", [0, 40, 512])
+def test_curve_set_matches_each_curve_bit_for_bit(scan, monkeypatch):
     """CurveSet answers every curve in one query and must give exactly what each Curve gives on
     its own (the smoothing's projections and so the meshes depend on it): crossing and
     touching curves (a query near another curve must still land on its own), a closed one,
-    collinear segments (ties: the lowest segment wins), and queries far beyond the set's
-    extent (answered curve by curve)."""
+    collinear segments (ties: the lowest segment wins), a curve longer than the scan limit,
+    and queries far beyond the set's extent (answered curve by curve). ``scan``: the longest
+    curve scanned whole by the compiled loop (0: every query through the KD-tree; 40: the
+    two 40-segment curves scanned, the others through the tree)."""
+    import shellmesh_mdao.smooth as sm
+    monkeypatch.setattr(sm, "SCAN_SEGMENTS", scan)
     rng = np.random.default_rng(7)
     s = np.linspace(0.0, 2.0, 41)
+    u = np.linspace(0.0, 1.0, 700)
     curves = [Curve(np.c_[s, np.zeros_like(s), np.zeros_like(s)]),           # x axis
               Curve(np.c_[np.ones_like(s), s - 1.0, np.zeros_like(s)]),       # crosses it at x = 1
               Curve(np.c_[np.cos(3 * s), np.sin(3 * s), 0.01 * s], closed=True),
-              Curve(np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0.5], [0, 0, 0.5]], float))]  # overlaps the x axis
+              Curve(np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0.5], [0, 0, 0.5]], float)),  # overlaps the x axis
+              Curve(np.c_[2 * u, np.sin(9 * u), 0.2 * np.cos(5 * u)])]        # 699 segments
     cs = CurveSet(curves)
     m = 600
     cid = rng.integers(0, len(curves), m)
