@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "closest_on_curves", "warm_up"]
+           "ortho_gradient", "closest_on_curves", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -363,6 +363,57 @@ def ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv):
         raise ValueError("n, su, sv and sw must have one entry per corner")
     return _ortho_jacobian(a, b, c, n, f[0], f[1], f[2], col_start, ncol, tv)
 
+@njit(cache=True, nogil=True)
+def _ortho_gradient(a, b, c, n, su, sv, w, x, nv):
+    ga = np.zeros((nv, 3))
+    gb = np.zeros((nv, 3))
+    gc = np.zeros((nv, 3))
+    for q in range(a.shape[0]):
+        ia, ib, ic = a[q], b[q], c[q]
+        n0, n1, n2 = n[q, 0], n[q, 1], n[q, 2]
+        u0, u1, u2 = x[ic, 0] - x[ib, 0], x[ic, 1] - x[ib, 1], x[ic, 2] - x[ib, 2]
+        k0, k1, k2 = n1 * u2 - n2 * u1, n2 * u0 - n0 * u2, n0 * u1 - n1 * u0
+        r0 = su[q] * (x[ia, 0] - x[ib, 0]) - sv[q] * k0
+        r1 = su[q] * (x[ia, 1] - x[ib, 1]) - sv[q] * k1
+        r2 = su[q] * (x[ia, 2] - x[ib, 2]) - sv[q] * k2
+        w0, w1, w2 = w[q] * r0, w[q] * r1, w[q] * r2
+        m0, m1, m2 = n1 * w2 - n2 * w1, n2 * w0 - n0 * w2, n0 * w1 - n1 * w0
+        ga[ia, 0] += su[q] * w0
+        ga[ia, 1] += su[q] * w1
+        ga[ia, 2] += su[q] * w2
+        gb[ib, 0] += -su[q] * w0 - sv[q] * m0
+        gb[ib, 1] += -su[q] * w1 - sv[q] * m1
+        gb[ib, 2] += -su[q] * w2 - sv[q] * m2
+        gc[ic, 0] += sv[q] * m0
+        gc[ic, 1] += sv[q] * m1
+        gc[ic, 2] += sv[q] * m2
+    for v in range(nv):
+        for d in range(3):
+            ga[v, d] = (ga[v, d] + gb[v, d]) + gc[v, d]
+    return ga
+
+
+def ortho_gradient(a, b, c, n, su, sv, w, x, nv):
+    """Gradient (nv, 3) of ``1/2 sum_q w[q] |r_q|^2`` at positions ``x`` (nv, 3), with the
+    corner residuals ``r_q = su (x_a - x_b) - sv n x (x_c - x_b)`` of
+    :func:`ortho_jacobian` (``a``, ``b``, ``c``, ``n``, ``su``, ``sv`` as there). The same
+    bits as the numpy version of :meth:`~shellmesh_mdao.smooth._Ortho.gradient`: each role's
+    terms summed over the corners in order (``np.bincount``), then the three roles added."""
+    a, b, c = (np.ascontiguousarray(v, dtype=np.int64).reshape(-1) for v in (a, b, c))
+    x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
+    nv = int(nv)
+    if len(x) != nv:
+        raise ValueError(f"x must hold the nv = {nv} positions")
+    m = len(a)
+    f = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (su, sv, w)]
+    n = np.ascontiguousarray(n, dtype=np.float64).reshape(-1, 3)
+    if len(b) != m or len(c) != m or len(n) != m or any(len(v) != m for v in f):
+        raise ValueError("a, b, c, n, su, sv and w must have one entry per corner")
+    for name, v in (("a", a), ("b", b), ("c", c)):
+        _check_index(name, v, nv)
+    return _ortho_gradient(a, b, c, n, f[0], f[1], f[2], x, nv)
+
+
 # ============================================================================ curves
 @njit(cache=True, nogil=True, error_model="numpy")
 def _closest_on_curves(q, cid, start, stop, a, ab, L):
@@ -430,5 +481,6 @@ def warm_up() -> float:
     common_neighbour_counts(np.array([0, 1, 2]), np.array([1, 0]), np.array([0]), np.array([1]))
     ortho_jacobian(np.array([0]), np.array([1]), np.array([2]), np.array([[0.0, 0.0, 1.0]]), np.ones(1),
                    np.ones(1), np.ones(1), np.array([0, 2, 4]), np.array([2, 2, 0]), np.eye(3)[[0, 1, 0, 1]])
+    ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
     closest_on_curves(np.zeros((1, 3)), [0], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [np.sqrt(3.0)])
     return time.perf_counter() - t0

@@ -973,18 +973,10 @@ class _Ortho:
         self.w = np.where(ok, scale * np.sqrt(lu_ * lv), 0.0)
 
     def gradient(self, x, n):
-        """(n, 3) gradient of 1/2 sum w |r|^2 at positions x."""
-        r = self.su[:, None] * (x[self.a] - x[self.b]) - self.sv[:, None] * cross_rows(self.n, x[self.c] - x[self.b])
-        wr = self.w[:, None] * r
-        nwr = cross_rows(self.n, wr)                     # [n]x^T = -[n]x
-        ga = self.su[:, None] * wr
-        gb = -self.su[:, None] * wr - self.sv[:, None] * nwr
-        gc = self.sv[:, None] * nwr
-        g = np.zeros((n, 3))
-        for v, gv in ((self.a, ga), (self.b, gb), (self.c, gc)):
-            for d in range(3):
-                g[:, d] += np.bincount(v, weights=gv[:, d], minlength=n)
-        return g
+        """(n, 3) gradient of 1/2 sum w |r|^2 at positions x (a compiled loop,
+        :func:`~shellmesh_mdao.kernels.ortho_gradient`)."""
+        from .kernels import ortho_gradient
+        return ortho_gradient(self.a, self.b, self.c, self.n, self.su, self.sv, self.w, x, n)
 
     def block_trace(self, n):
         """Mean diagonal of each vertex's 3x3 block of the Hessian."""

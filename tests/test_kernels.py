@@ -5,7 +5,7 @@ import pytest
 from scipy import sparse
 
 from shellmesh_mdao.kernels import (closest_on_curves, common_neighbour_counts, greedy_independent,
-                                    greedy_independent_rings, ortho_jacobian)
+                                    greedy_independent_rings, ortho_gradient, ortho_jacobian)
 from shellmesh_mdao.mesh import cross_rows
 
 
@@ -192,6 +192,32 @@ def test_ortho_jacobian_matches_the_scipy_assembly(seed):
     assert np.array_equal(indptr, ref.indptr)
     assert np.array_equal(indices, ref.indices)
     assert np.array_equal(data, ref.data)            # the same bits, so the same Hessian and solve
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_ortho_gradient_matches_bincounts_and_the_jacobian(seed):
+    rng = np.random.default_rng(250 + seed)
+    nv = int(rng.integers(3, 200))
+    m = int(rng.integers(1, 400))
+    a, b, c = np.array([rng.choice(nv, 3, replace=False) for _ in range(m)]).T
+    n = rng.normal(size=(m, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    su, sv, w = rng.uniform(0.1, 3.0, (3, m))
+    x = rng.normal(size=(nv, 3)) * 10.0 ** rng.uniform(-3, 3)
+    got = ortho_gradient(a, b, c, n, su, sv, w, x, nv)
+    # the numpy version it replaced: residuals, then one bincount per role and axis
+    r = su[:, None] * (x[a] - x[b]) - sv[:, None] * cross_rows(n, x[c] - x[b])
+    wr = w[:, None] * r
+    nwr = cross_rows(n, wr)
+    ref = np.zeros((nv, 3))
+    for v, gv in ((a, su[:, None] * wr), (b, -su[:, None] * wr - sv[:, None] * nwr), (c, sv[:, None] * nwr)):
+        for d in range(3):
+            ref[:, d] += np.bincount(v, weights=gv[:, d], minlength=nv)
+    assert np.array_equal(got, ref)
+    # r is linear in x: the gradient is J^T J x with J = sqrt(w) dr/dx (ortho_jacobian, full 3D columns)
+    J = sparse.csr_matrix(ortho_jacobian(a, b, c, n, su, sv, np.sqrt(w), 3 * np.arange(nv), np.full(nv, 3),
+                                         np.tile(np.eye(3), (nv, 1))), shape=(3 * m, 3 * nv))
+    assert np.allclose(got.ravel(), J.T @ (J @ x.ravel()), rtol=1e-9, atol=1e-9 * np.abs(ref).max())
 
 
 def test_ortho_jacobian_of_a_right_angle_is_zero():
