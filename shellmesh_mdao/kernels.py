@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "closest_on_curves", "warm_up"]
+           "ortho_gradient", "min_corner_sj", "closest_on_curves", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -414,6 +414,89 @@ def ortho_gradient(a, b, c, n, su, sv, w, x, nv):
     return _ortho_gradient(a, b, c, n, f[0], f[1], f[2], x, nv)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _nanmin(x, y):
+    """np.minimum of two floats (a NaN wins)."""
+    if x != x or y != y:
+        return np.nan
+    return x if x < y else y
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _min_corner_sj(P, faces, is_tri, nref, use_ref, tri_scale):
+    m = faces.shape[0]
+    out = np.empty(m)
+    C = np.empty((4, 3))
+    E = np.empty((4, 3))
+    cr = np.empty((4, 3))
+    L = np.empty(4)
+    nn = np.empty(3)
+    for f in range(m):
+        k = 3 if is_tri[f] else 4
+        for i in range(k):
+            for d in range(3):
+                C[i, d] = P[faces[f, i], d]
+        # own unit normal (smooth._corner_normals, smooth._unit)
+        if k == 4:
+            u0, u1, u2 = C[2, 0] - C[0, 0], C[2, 1] - C[0, 1], C[2, 2] - C[0, 2]
+            w0, w1, w2 = C[3, 0] - C[1, 0], C[3, 1] - C[1, 1], C[3, 2] - C[1, 2]
+        else:
+            u0, u1, u2 = C[1, 0] - C[0, 0], C[1, 1] - C[0, 1], C[1, 2] - C[0, 2]
+            w0, w1, w2 = C[2, 0] - C[0, 0], C[2, 1] - C[0, 1], C[2, 2] - C[0, 2]
+        v0, v1, v2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+        ln = np.sqrt((v0 * v0 + v2 * v2) + v1 * v1)          # einsum's order
+        if ln > 0:
+            nn[0], nn[1], nn[2] = v0 / ln, v1 / ln, v2 / ln
+        else:
+            nn[0], nn[1], nn[2] = 0.0, 0.0, 0.0
+        for i in range(k):
+            j = i + 1 if i + 1 < k else 0
+            for d in range(3):
+                E[i, d] = C[j, d] - C[i, d]
+        for i in range(k):
+            h = i - 1 if i > 0 else k - 1
+            cr[i, 0] = E[h, 1] * E[i, 2] - E[h, 2] * E[i, 1]
+            cr[i, 1] = E[h, 2] * E[i, 0] - E[h, 0] * E[i, 2]
+            cr[i, 2] = E[h, 0] * E[i, 1] - E[h, 1] * E[i, 0]
+            L[i] = np.sqrt((E[i, 0] * E[i, 0] + E[i, 1] * E[i, 1]) + E[i, 2] * E[i, 2])   # norm_rows' order
+        scale = tri_scale if k == 3 else 1.0
+        best = np.inf
+        for pass_ in range(2 if use_ref else 1):
+            if pass_ == 1:
+                nn[0], nn[1], nn[2] = nref[f, 0], nref[f, 1], nref[f, 2]
+            lo = np.inf
+            for i in range(k):
+                h = i - 1 if i > 0 else k - 1
+                den = L[i] * L[h]
+                sc = (cr[i, 0] * nn[0] + cr[i, 2] * nn[2]) + cr[i, 1] * nn[1]
+                q = sc / den if den > 0 else 0.0
+                lo = q if i == 0 else _nanmin(lo, q)
+            best = _nanmin(best, lo * scale)
+        out[f] = best
+    return out
+
+
+def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
+    """Per element ``faces`` (m, 4; a triangle's fourth entry is not read) of the points ``P``:
+    the smallest corner scaled Jacobian, ``(e_prev x e_next) . n / (|e_prev| |e_next|)``, against
+    the element's own unit normal and, when ``nref`` (m, 3) is given, against that normal too
+    (the smaller); triangles times ``tri_scale`` (1 = equilateral). The same bits as the numpy
+    version (:func:`shellmesh_mdao.smooth._corner_min_sj` on the corners and
+    ``_corner_normals``), whose sums of three products it repeats in numpy's order."""
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 4)
+    is_tri = np.ascontiguousarray(is_tri, dtype=np.bool_).reshape(-1)
+    if len(is_tri) != len(faces):
+        raise ValueError("is_tri must have one entry per face")
+    used = np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]])
+    _check_index("faces", used, len(P))
+    use_ref = nref is not None
+    nref = np.ascontiguousarray(nref if use_ref else np.zeros((len(faces), 3)), dtype=np.float64).reshape(-1, 3)
+    if len(nref) != len(faces):
+        raise ValueError("nref must have one normal per face")
+    return _min_corner_sj(P, faces, is_tri, nref, use_ref, float(tri_scale))
+
+
 # ============================================================================ curves
 @njit(cache=True, nogil=True, error_model="numpy")
 def _closest_on_curves(q, cid, start, stop, a, ab, L):
@@ -482,5 +565,7 @@ def warm_up() -> float:
     ortho_jacobian(np.array([0]), np.array([1]), np.array([2]), np.array([[0.0, 0.0, 1.0]]), np.ones(1),
                    np.ones(1), np.ones(1), np.array([0, 2, 4]), np.array([2, 2, 0]), np.eye(3)[[0, 1, 0, 1]])
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
+    min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]), np.array([[0.0, 0.0, 1.0]]))
+    min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]))
     closest_on_curves(np.zeros((1, 3)), [0], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [np.sqrt(3.0)])
     return time.perf_counter() - t0

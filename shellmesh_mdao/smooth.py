@@ -63,7 +63,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import closest_on_curves
+from .kernels import closest_on_curves, min_corner_sj
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -190,7 +190,7 @@ class CurveSet:
 
     def __init__(self, curves):
         self.curves = list(curves)
-        self._a = None
+        self._nseg = None
         self._tree = None
 
     def _build(self):
@@ -215,7 +215,7 @@ class CurveSet:
         k = len(q)
         if not k:
             return np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-        if self._a is None:
+        if getattr(self, "_nseg", None) is None:
             self._build()
         X, D, T = np.zeros((k, 3)), np.zeros(k), np.zeros((k, 3))
         # curves of up to SCAN_SEGMENTS segments: every segment is scanned by a compiled loop
@@ -675,9 +675,10 @@ def _corner_normals(c, is_tri):
 
 def _min_corner_sj(P, faces, is_tri, nref=None):
     """Per element: min over corners of the scaled Jacobian against the element's own normal
-    and (if given) against ``nref``; triangles scaled by 2/sqrt(3) (1 = equilateral)."""
-    c = P[np.where(faces >= 0, faces, faces[:, :1])]           # (m, 4, 3)
-    return _corner_min_sj(c, is_tri, _corner_normals(c, is_tri), nref)
+    and (if given) against ``nref``; triangles scaled by 2/sqrt(3) (1 = equilateral). A
+    compiled loop (:func:`~shellmesh_mdao.kernels.min_corner_sj`), the same bits as
+    :func:`_corner_min_sj` on the corners and their :func:`_corner_normals`."""
+    return min_corner_sj(P, faces, is_tri, nref, _TRI_SJ)
 
 
 def _corner_min_sj(c, is_tri, nown, nref=None):

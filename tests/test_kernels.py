@@ -5,7 +5,7 @@ import pytest
 from scipy import sparse
 
 from shellmesh_mdao.kernels import (closest_on_curves, common_neighbour_counts, greedy_independent,
-                                    greedy_independent_rings, ortho_gradient, ortho_jacobian)
+                                    greedy_independent_rings, min_corner_sj, ortho_gradient, ortho_jacobian)
 from shellmesh_mdao.mesh import cross_rows
 
 
@@ -220,6 +220,33 @@ def test_ortho_gradient_matches_bincounts_and_the_jacobian(seed):
     assert np.allclose(got.ravel(), J.T @ (J @ x.ravel()), rtol=1e-9, atol=1e-9 * np.abs(ref).max())
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_min_corner_sj_matches_the_numpy_corners(seed):
+    from shellmesh_mdao.smooth import _TRI_SJ, _corner_min_sj, _corner_normals
+    rng = np.random.default_rng(400 + seed)
+    nv, m = 60, 300
+    P = rng.normal(size=(nv, 3)) * 10.0 ** rng.uniform(-3, 3)
+    faces = np.array([rng.choice(nv, 4, replace=False) for _ in range(m)])
+    is_tri = rng.random(m) < 0.4
+    faces[is_tri, 3] = -1
+    faces[::17, 1] = faces[::17, 0]                     # a zero-length edge: its corners score 0
+    nref = rng.normal(size=(m, 3))
+    c = P[np.where(faces >= 0, faces, faces[:, :1])]
+    for nr in (None, nref):
+        ref = _corner_min_sj(c, is_tri, _corner_normals(c, is_tri), nr)
+        assert np.array_equal(min_corner_sj(P, faces, is_tri, nr, _TRI_SJ), ref)
+
+
+def test_min_corner_sj_known_values():
+    P = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, np.sqrt(3) / 2, 0], [0.3, 0.3, 0]])
+    faces = np.array([[0, 1, 2, 3], [0, 1, 4, -1], [0, 1, 5, 3]])    # square, equilateral, dart
+    got = min_corner_sj(P, faces, np.array([False, True, False]))
+    assert np.allclose(got[:2], 1.0)
+    assert got[2] < 0                                    # the dart's reflex corner
+    up = np.tile([0.0, 0.0, 1.0], (3, 1))
+    assert np.allclose(min_corner_sj(P, faces[:2], np.array([False, True]), -up[:2]), -1.0)   # against a flipped reference
+
+
 def test_ortho_jacobian_of_a_right_angle_is_zero():
     # unit square corner b=(0,0,0), a=(0,1,0) before it, c=(1,0,0) after it, normal +z:
     # r = (a-b)/|a-b| - n x (c-b)/|c-b| = (0,1,0) - (0,1,0) = 0 at this position, and J x = r
@@ -285,6 +312,10 @@ def test_kernels_refuse_indices_out_of_range():
         ortho_jacobian([0], [1], [3], [[0.0, 0, 1]], one, one, one, [0, 1, 2], [1, 1, 1], np.eye(3))
     with pytest.raises(ValueError, match="rows of tv"):
         ortho_jacobian([0], [1], [2], [[0.0, 0, 1]], one, one, one, [0, 1, 2], [1, 1, 2], np.eye(3))
+    with pytest.raises(ValueError, match="faces holds indices outside"):
+        min_corner_sj(np.eye(3), np.array([[0, 1, 3, -1]]), np.array([True]))
+    with pytest.raises(ValueError, match="faces holds indices outside"):
+        min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([False]))   # a quad needs its fourth node
     with pytest.raises(ValueError, match="cid holds indices outside"):
         closest_on_curves(np.zeros((1, 3)), [1], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [1.0])
     with pytest.raises(ValueError, match="segment range"):
