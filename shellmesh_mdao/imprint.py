@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import greedy_independent
+from .kernels import greedy_independent, stable_pair_order
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .section import Plane, SectionArc, section_arc
 
@@ -1195,7 +1195,7 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     lo, hi = np.minimum(a, b).ravel(), np.maximum(a, b).ravel()
     n = len(P)
     key = lo * n + hi
-    order = np.argsort(key, kind="stable")
+    order = stable_pair_order(lo, hi, n)
     ks = key[order]
     same = np.flatnonzero(ks[1:] == ks[:-1])
     if not len(same):

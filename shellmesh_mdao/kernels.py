@@ -17,7 +17,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "min_corner_sj", "closest_on_curves", "warm_up"]
+           "ortho_gradient", "min_corner_sj", "closest_on_curves", "stable_order",
+           "stable_pair_order", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -497,6 +498,49 @@ def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
     return _min_corner_sj(P, faces, is_tri, nref, use_ref, float(tri_scale))
 
 
+# ============================================================================ sorting
+@njit(cache=True, nogil=True)
+def _counting_order(keys, n, idx):
+    """Stable order of ``keys[idx]`` (all in [0, n)) as positions into ``idx``."""
+    cnt = np.zeros(n + 1, np.int64)
+    for i in range(idx.shape[0]):
+        cnt[keys[idx[i]] + 1] += 1
+    for k in range(n):
+        cnt[k + 1] += cnt[k]
+    out = np.empty(idx.shape[0], np.int64)
+    for i in range(idx.shape[0]):
+        k = keys[idx[i]]
+        out[cnt[k]] = idx[i]
+        cnt[k] += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _pair_order(lo, hi, n):
+    o = _counting_order(hi, n, np.arange(hi.shape[0]))
+    return _counting_order(lo, n, o)
+
+
+def stable_order(keys, n):
+    """``np.argsort(keys, kind="stable")`` for integer keys in [0, n), by a counting sort
+    (O(len + n); a stable order is unique, so the same array)."""
+    keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
+    _check_index("keys", keys, int(n))
+    return _counting_order(keys, int(n), np.arange(len(keys)))
+
+
+def stable_pair_order(lo, hi, n):
+    """``np.argsort(lo * n + hi, kind="stable")`` for integer ``lo``, ``hi`` in [0, n): two
+    counting sorts (by ``hi``, then stably by ``lo``), the same array without the products."""
+    lo = np.ascontiguousarray(lo, dtype=np.int64).reshape(-1)
+    hi = np.ascontiguousarray(hi, dtype=np.int64).reshape(-1)
+    if len(lo) != len(hi):
+        raise ValueError("lo and hi must have the same length")
+    _check_index("lo", lo, int(n))
+    _check_index("hi", hi, int(n))
+    return _pair_order(lo, hi, int(n))
+
+
 # ============================================================================ curves
 @njit(cache=True, nogil=True, error_model="numpy")
 def _closest_on_curves(q, cid, start, stop, a, ab, L):
@@ -567,5 +611,7 @@ def warm_up() -> float:
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
     min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]), np.array([[0.0, 0.0, 1.0]]))
     min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]))
+    stable_order(np.array([1, 0, 1]), 2)
+    stable_pair_order(np.array([1, 0]), np.array([0, 1]), 2)
     closest_on_curves(np.zeros((1, 3)), [0], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [np.sqrt(3.0)])
     return time.perf_counter() - t0

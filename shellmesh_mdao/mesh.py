@@ -473,7 +473,8 @@ def vertex_faces(faces: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarr
     valid = f >= 0
     fi = np.broadcast_to(np.arange(len(f))[:, None], f.shape)[valid]
     v = f[valid]
-    order = np.argsort(v, kind="stable")
+    from .kernels import stable_order                 # numba: imported on first use
+    order = stable_order(v, n_points)
     ptr = np.zeros(n_points + 1, np.int64)
     np.cumsum(np.bincount(v, minlength=n_points), out=ptr[1:])
     return ptr, fi[order]

@@ -38,7 +38,8 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import common_neighbour_counts, greedy_independent, greedy_independent_rings
+from .kernels import (common_neighbour_counts, greedy_independent, greedy_independent_rings, stable_order,
+                      stable_pair_order)
 from .mesh import ShellMesh, cross_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -97,7 +98,7 @@ def _tri_angles(P, F):
 
 def _csr(keys, n):
     """Order and row pointers grouping ``arange(len(keys))`` by ``keys`` in [0, n)."""
-    order = np.argsort(keys, kind="stable")
+    order = stable_order(keys, n)
     ptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
     return ptr, order
@@ -139,7 +140,7 @@ class _Topo:
         lo = np.minimum(a, b)
         hi = np.maximum(a, b)
         key = lo * n + hi
-        order = np.argsort(key, kind="stable")
+        order = stable_pair_order(lo, hi, n)
         ks = key[order]
         first = np.ones(len(ks), bool)
         first[1:] = ks[1:] != ks[:-1]

@@ -5,7 +5,8 @@ import pytest
 from scipy import sparse
 
 from shellmesh_mdao.kernels import (closest_on_curves, common_neighbour_counts, greedy_independent,
-                                    greedy_independent_rings, min_corner_sj, ortho_gradient, ortho_jacobian)
+                                    greedy_independent_rings, min_corner_sj, ortho_gradient, ortho_jacobian,
+                                    stable_order, stable_pair_order)
 from shellmesh_mdao.mesh import cross_rows
 
 
@@ -292,6 +293,17 @@ def test_closest_on_curves_matches_the_numpy_pick(seed):
     assert ((seg >= start[cid]) & (seg < stop[cid])).all() and np.isfinite(d).all()
 
 
+@pytest.mark.parametrize("seed", range(5))
+def test_counting_sorts_give_numpy_stable_argsort(seed):
+    rng = np.random.default_rng(500 + seed)
+    n = int(rng.integers(1, 400))
+    m = int(rng.integers(0, 4000))
+    k, lo, hi = rng.integers(0, n, (3, m))
+    assert np.array_equal(stable_order(k, n), np.argsort(k, kind="stable"))
+    assert np.array_equal(stable_pair_order(lo, hi, n), np.argsort(lo * n + hi, kind="stable"))
+    assert np.array_equal(stable_order([2, 0, 2, 1, 0], 3), [1, 4, 3, 0, 2])
+
+
 def test_kernels_refuse_indices_out_of_range():
     # the compiled loops do not check bounds: the wrappers must
     with pytest.raises(ValueError, match="res holds indices outside"):
@@ -316,6 +328,10 @@ def test_kernels_refuse_indices_out_of_range():
         min_corner_sj(np.eye(3), np.array([[0, 1, 3, -1]]), np.array([True]))
     with pytest.raises(ValueError, match="faces holds indices outside"):
         min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([False]))   # a quad needs its fourth node
+    with pytest.raises(ValueError, match="keys holds indices outside"):
+        stable_order([0, 3], 3)
+    with pytest.raises(ValueError, match="lo holds indices outside"):
+        stable_pair_order([-1], [0], 3)
     with pytest.raises(ValueError, match="cid holds indices outside"):
         closest_on_curves(np.zeros((1, 3)), [1], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [1.0])
     with pytest.raises(ValueError, match="segment range"):
