@@ -32,7 +32,7 @@ from scipy.spatial import cKDTree
 from .errors import ImprintError
 from .kernels import greedy_independent, stable_pair_order
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
-from .section import Plane, SectionArc, section_arc
+from .section import Plane, SectionArc, plane_section, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain",
            "refine_chains", "split_member_bridges"]
@@ -546,8 +546,17 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     diag = float(np.linalg.norm(surface_points.max(0) - surface_points.min(0)))
     eps = tol * diag
     # 1. exact arcs on the input surface
+    #    (the plane section of the whole input once per plane: a member's chains share it)
+    sections: dict = {}
+
+    def section_of(plane):
+        key = (np.asarray(plane.point, float).tobytes(), np.asarray(plane.normal, float).tobytes())
+        if key not in sections:
+            sections[key] = plane_section(surface_points, surface_tris, plane)
+        return sections[key]
+
     arcs = [section_arc(surface_points, surface_tris, c.plane, c.bounds, seed=c.seed, seed_tri=c.seed_tri,
-                        name=f"{c.member} ({c.side})") for c in chains]
+                        name=f"{c.member} ({c.side})", section=section_of(c.plane)) for c in chains]
     # 2. crossing points: ends of open arcs, and points where one arc crosses another
     #    member's plane ON that member's arc (a middle spar crossing a rib); deduplicated
     cand = [a.points[[0, -1]] for a in arcs if not a.closed]

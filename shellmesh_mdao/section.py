@@ -160,7 +160,8 @@ def _clip_links(p0: np.ndarray, p1: np.ndarray, bounds, tol: float = 0.0) -> tup
 
 def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), seed=None,
                 seed_tri: int | None = None, name: str = "member", merge_tol: float | None = None,
-                zero_vertices=None, bound_tol: float = 0.0, stop_vertices=None) -> SectionArc:
+                zero_vertices=None, bound_tol: float = 0.0, stop_vertices=None,
+                section: PlaneSection | None = None) -> SectionArc:
     """The connected arc of ``plane ∩ surface`` inside every half-space of ``bounds`` that
     passes through ``seed`` (a point on the surface and the plane, e.g. a ray-cast hit).
 
@@ -170,9 +171,11 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
     ``zero_vertices`` are taken to lie exactly on the plane; a point within ``bound_tol``
     outside a bound counts as inside, and clipped pieces not longer than ``bound_tol`` are
     dropped (so an arc ends exactly at a vertex placed on the bound). Raises :class:`ImprintError` (naming
-    ``name``) when the plane misses the surface inside the bounds.
+    ``name``) when the plane misses the surface inside the bounds. ``section``: the
+    :func:`plane_section` of these ``points``, ``tris``, ``plane`` and ``zero_vertices`` when the
+    caller has it already (several arcs of one plane); computed here when None.
     """
-    sec = plane_section(points, tris, plane, zero_vertices)
+    sec = plane_section(points, tris, plane, zero_vertices) if section is None else section
     if not len(sec.links):
         raise ImprintError(f"{name}: its plane does not cut the surface; check the member's position "
                            "(it must lie inside the aircraft)")

@@ -70,6 +70,21 @@ def test_clipped_arc_runs_between_bounds_and_follows_seed(wing):
         assert len(arc.tri) == len(arc.points) - 1
 
 
+def test_arcs_from_a_shared_section_match_fresh_ones(wing):
+    # the imprint computes a member plane's section once for both its chains: the upper and
+    # lower arcs cut from it must be the arcs section_arc computes on its own
+    P, T = wing
+    rib = Plane.make([0, 2.0, 0], [0, 1, 0])
+    bounds = [Plane.make([0.15, 0, 0], [1, 0, 0]), Plane.make([0.65, 0, 0], [-1, 0, 0])]
+    sec = plane_section(P, T, rib)
+    for z in (0.06, -0.06):
+        fresh = section_arc(P, T, rib, bounds, seed=[0.4, 2.0, z])
+        shared = section_arc(P, T, rib, bounds, seed=[0.4, 2.0, z], section=sec)
+        assert np.array_equal(fresh.points, shared.points) and np.array_equal(fresh.tri, shared.tri)
+        assert np.sign(shared.points[:, 2]).tolist() == [np.sign(z)] * len(shared.points)
+    assert len(sec.links) == len(plane_section(P, T, rib).links)       # the shared section is left as it was
+
+
 def test_plane_through_vertices_has_no_zero_length_pieces(wing):
     P, T = wing
     y = P[5 * 80, 1]                                   # a row of section vertices
