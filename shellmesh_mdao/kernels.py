@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "min_corner_sj", "closest_on_curves", "stable_order",
+           "ortho_gradient", "min_corner_sj", "closest_on_curves", "closest_on_triangles", "stable_order",
            "stable_pair_order", "warm_up"]
 
 
@@ -541,6 +541,105 @@ def stable_pair_order(lo, hi, n):
     return _pair_order(lo, hi, int(n))
 
 
+# ============================================================================ triangles
+@njit(cache=True, nogil=True, inline="always")
+def _dot3(x0, x1, x2, y0, y1, y2):
+    return (x0 * y0 + x2 * y2) + x1 * y1             # numpy's einsum("ij,ij->i") over three
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _on_segment(p, s, e, out):
+    """Closest point of the segment s-e to ``p``: ``s + clip(t, 0, 1) (e - s)``, t = 0 on a
+    zero-length segment."""
+    d0, d1, d2 = e[0] - s[0], e[1] - s[1], e[2] - s[2]
+    L2 = _dot3(d0, d1, d2, d0, d1, d2)
+    t = 0.0
+    if L2 > 0:
+        t = _dot3(p[0] - s[0], p[1] - s[1], p[2] - s[2], d0, d1, d2) / L2
+    if t == t:
+        t = t if t > 0.0 else 0.0
+        t = t if t < 1.0 else 1.0
+    out[0], out[1], out[2] = s[0] + t * d0, s[1] + t * d1, s[2] + t * d2
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _closest_on_triangles(P, A, B, C):
+    k = P.shape[0]
+    out = np.empty((k, 3))
+    q = np.empty((3, 3))
+    for i in range(k):
+        p, a, b, c = P[i], A[i], B[i], C[i]
+        ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+        ap0, ap1, ap2 = p[0] - a[0], p[1] - a[1], p[2] - a[2]
+        d1 = _dot3(ab0, ab1, ab2, ap0, ap1, ap2)
+        d2 = _dot3(ac0, ac1, ac2, ap0, ap1, ap2)
+        bp0, bp1, bp2 = p[0] - b[0], p[1] - b[1], p[2] - b[2]
+        d3 = _dot3(ab0, ab1, ab2, bp0, bp1, bp2)
+        d4 = _dot3(ac0, ac1, ac2, bp0, bp1, bp2)
+        cp0, cp1, cp2 = p[0] - c[0], p[1] - c[1], p[2] - c[2]
+        d5 = _dot3(ab0, ab1, ab2, cp0, cp1, cp2)
+        d6 = _dot3(ac0, ac1, ac2, cp0, cp1, cp2)
+        va = d3 * d6 - d5 * d4
+        vb = d5 * d2 - d1 * d6
+        vc = d1 * d4 - d3 * d2
+        if d1 <= 0 and d2 <= 0:                                   # vertex a
+            out[i, 0], out[i, 1], out[i, 2] = a[0], a[1], a[2]
+        elif d3 >= 0 and d4 <= d3:                                # vertex b
+            out[i, 0], out[i, 1], out[i, 2] = b[0], b[1], b[2]
+        elif d6 >= 0 and d5 <= d6:                                # vertex c
+            out[i, 0], out[i, 1], out[i, 2] = c[0], c[1], c[2]
+        elif vc <= 0 and d1 >= 0 and d3 <= 0:                     # edge ab
+            v = d1 / (d1 - d3)
+            out[i, 0], out[i, 1], out[i, 2] = a[0] + v * ab0, a[1] + v * ab1, a[2] + v * ab2
+        elif vb <= 0 and d2 >= 0 and d6 <= 0:                     # edge ac
+            w = d2 / (d2 - d6)
+            out[i, 0], out[i, 1], out[i, 2] = a[0] + w * ac0, a[1] + w * ac1, a[2] + w * ac2
+        elif va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:       # edge bc
+            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            out[i, 0] = b[0] + w * (c[0] - b[0])
+            out[i, 1] = b[1] + w * (c[1] - b[1])
+            out[i, 2] = b[2] + w * (c[2] - b[2])
+        else:
+            den = va + vb + vc
+            vv = vb / den
+            ww = vc / den
+            x0 = (a[0] + vv * ab0) + ww * ac0
+            x1 = (a[1] + vv * ab1) + ww * ac1
+            x2 = (a[2] + vv * ab2) + ww * ac2
+            if np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2):
+                out[i, 0], out[i, 1], out[i, 2] = x0, x1, x2
+            else:
+                # a zero-area triangle: the nearest of its three edges (the first on a tie; a
+                # NaN distance wins, as np.argmin picks the first NaN)
+                _on_segment(p, a, b, q[0])
+                _on_segment(p, b, c, q[1])
+                _on_segment(p, c, a, q[2])
+                best, kb = 0.0, -1
+                for j in range(3):
+                    e0, e1, e2 = q[j, 0] - p[0], q[j, 1] - p[1], q[j, 2] - p[2]
+                    dj = _dot3(e0, e1, e2, e0, e1, e2)
+                    if dj != dj:
+                        kb = j
+                        break
+                    if kb < 0 or dj < best:
+                        best, kb = dj, j
+                out[i, 0], out[i, 1], out[i, 2] = q[kb, 0], q[kb, 1], q[kb, 2]
+    return out
+
+
+def closest_on_triangles(p, a, b, c):
+    """Closest point of triangle ``(a[i], b[i], c[i])`` to ``p[i]`` (all (k, 3)): the same bits
+    as the numpy version of :func:`shellmesh_mdao.project.closest_point_on_triangles` (Ericson's
+    regions in the same order, numpy's sums of three products, the degenerate fallback onto
+    the nearest edge), one pass per point."""
+    p, a, b, c = (np.ascontiguousarray(x, dtype=np.float64) for x in np.broadcast_arrays(
+        *(np.asarray(x, dtype=np.float64) for x in (p, a, b, c))))
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError("closest_on_triangles takes (k, 3) arrays")
+    return _closest_on_triangles(p, a, b, c)
+
+
 # ============================================================================ curves
 @njit(cache=True, nogil=True, error_model="numpy")
 def _closest_on_curves(q, cid, start, stop, a, ab, L):
@@ -613,5 +712,6 @@ def warm_up() -> float:
     min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]))
     stable_order(np.array([1, 0, 1]), 2)
     stable_pair_order(np.array([1, 0]), np.array([0, 1]), 2)
+    closest_on_triangles(np.ones((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.eye(3)[1:2])
     closest_on_curves(np.zeros((1, 3)), [0], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [np.sqrt(3.0)])
     return time.perf_counter() - t0

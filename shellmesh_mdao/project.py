@@ -36,67 +36,12 @@ __all__ = ["SurfaceLocator", "closest_point_on_triangles", "ray_triangle_interse
 # ----------------------------------------------------------------------------- kernels
 def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Closest point of triangle ``(a[i], b[i], c[i])`` to ``p[i]``, row-wise (Ericson's
-    region test, vectorised). All inputs (k, 3) float64 (or broadcastable); returns (k, 3).
-    Degenerate triangles are handled by the edge regions."""
-    p, a, b, c = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (p, a, b, c)))
-    ab = b - a
-    ac = c - a
-    ap = p - a
-    d1 = np.einsum("ij,ij->i", ab, ap)
-    d2 = np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3 = np.einsum("ij,ij->i", ab, bp)
-    d4 = np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5 = np.einsum("ij,ij->i", ab, cp)
-    d6 = np.einsum("ij,ij->i", ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-
-    out = np.empty_like(p)
-    done = np.zeros(len(p), dtype=bool)
-
-    def put(mask, val):
-        m = mask & ~done
-        if m.any():
-            out[m] = val[m] if val.ndim == 2 else val
-        done[m] = True
-
-    with np.errstate(divide="ignore", invalid="ignore"):
-        put((d1 <= 0) & (d2 <= 0), a)                                      # vertex a
-        put((d3 >= 0) & (d4 <= d3), b)                                     # vertex b
-        put((d6 >= 0) & (d5 <= d6), c)                                     # vertex c
-        v = d1 / (d1 - d3)
-        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + v[:, None] * ab)        # edge ab
-        w = d2 / (d2 - d6)
-        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + w[:, None] * ac)        # edge ac
-        w2 = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), b + w2[:, None] * (c - b))  # edge bc
-        denom = va + vb + vc
-        vv = vb / denom
-        ww = vc / denom
-        inside = a + vv[:, None] * ab + ww[:, None] * ac
-        rest = ~done
-        if rest.any():
-            ok = rest & np.isfinite(inside).all(1)
-            out[ok] = inside[ok]
-            done[ok] = True
-    if not done.all():  # fully degenerate (zero-area) triangles left: nearest of the 3 edges
-        r = np.flatnonzero(~done)
-        cands = [_closest_on_segment(p[r], a[r], b[r]), _closest_on_segment(p[r], b[r], c[r]),
-                 _closest_on_segment(p[r], c[r], a[r])]
-        d = np.stack([np.einsum("ij,ij->i", q - p[r], q - p[r]) for q in cands], 1)
-        k = np.argmin(d, axis=1)
-        out[r] = np.stack(cands, 1)[np.arange(len(r)), k]
-    return out
-
-
-def _closest_on_segment(p, a, b):
-    ab = b - a
-    L2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.divide(np.einsum("ij,ij->i", p - a, ab), L2, out=np.zeros(len(p)), where=L2 > 0)
-    return a + np.clip(t, 0.0, 1.0)[:, None] * ab
+    region test: the vertices, then the edges ab, ac, bc, then the interior). All inputs
+    (k, 3) float64 (or broadcastable); returns (k, 3). Degenerate triangles (zero area) go
+    to the nearest of their three edges. A compiled loop
+    (:func:`~shellmesh_mdao.kernels.closest_on_triangles`)."""
+    from .kernels import closest_on_triangles          # numba: imported on first use
+    return closest_on_triangles(p, a, b, c)
 
 
 def ray_triangle_intersect(o, d, a, b, c):

@@ -304,6 +304,96 @@ def test_counting_sorts_give_numpy_stable_argsort(seed):
     assert np.array_equal(stable_order([2, 0, 2, 1, 0], 3), [1, 4, 3, 0, 2])
 
 
+def _triangles_reference(p, a, b, c):
+    """The whole-array version the kernel replaced (project.closest_point_on_triangles before it)."""
+    p, a, b, c = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (p, a, b, c)))
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = np.einsum("ij,ij->i", ab, ap)
+    d2 = np.einsum("ij,ij->i", ac, ap)
+    bp = p - b
+    d3 = np.einsum("ij,ij->i", ab, bp)
+    d4 = np.einsum("ij,ij->i", ac, bp)
+    cp = p - c
+    d5 = np.einsum("ij,ij->i", ab, cp)
+    d6 = np.einsum("ij,ij->i", ac, cp)
+    va = d3 * d6 - d5 * d4
+    vb = d5 * d2 - d1 * d6
+    vc = d1 * d4 - d3 * d2
+
+    out = np.empty_like(p)
+    done = np.zeros(len(p), dtype=bool)
+
+    def put(mask, val):
+        m = mask & ~done
+        if m.any():
+            out[m] = val[m] if val.ndim == 2 else val
+        done[m] = True
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        put((d1 <= 0) & (d2 <= 0), a)                                      # vertex a
+        put((d3 >= 0) & (d4 <= d3), b)                                     # vertex b
+        put((d6 >= 0) & (d5 <= d6), c)                                     # vertex c
+        v = d1 / (d1 - d3)
+        put((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + v[:, None] * ab)        # edge ab
+        w = d2 / (d2 - d6)
+        put((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + w[:, None] * ac)        # edge ac
+        w2 = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), b + w2[:, None] * (c - b))  # edge bc
+        denom = va + vb + vc
+        vv = vb / denom
+        ww = vc / denom
+        inside = a + vv[:, None] * ab + ww[:, None] * ac
+        rest = ~done
+        if rest.any():
+            ok = rest & np.isfinite(inside).all(1)
+            out[ok] = inside[ok]
+            done[ok] = True
+    if not done.all():  # fully degenerate (zero-area) triangles left: nearest of the 3 edges
+        r = np.flatnonzero(~done)
+        cands = [_segment_reference(p[r], a[r], b[r]), _segment_reference(p[r], b[r], c[r]),
+                 _segment_reference(p[r], c[r], a[r])]
+        d = np.stack([np.einsum("ij,ij->i", q - p[r], q - p[r]) for q in cands], 1)
+        k = np.argmin(d, axis=1)
+        out[r] = np.stack(cands, 1)[np.arange(len(r)), k]
+    return out
+
+
+def _segment_reference(p, a, b):
+    ab = b - a
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.divide(np.einsum("ij,ij->i", p - a, ab), L2, out=np.zeros(len(p)), where=L2 > 0)
+    return a + np.clip(t, 0.0, 1.0)[:, None] * ab
+
+
+def test_closest_on_triangles_matches_the_numpy_regions():
+    # every region of Ericson's test, points on vertices and edges, and zero-area triangles
+    # (collinear, a repeated corner, all three corners equal): the same bits (NaN where the
+    # numpy version gave NaN: a triangle with a zero-length edge ab meets 0 / 0 in its region)
+    from shellmesh_mdao.kernels import closest_on_triangles
+    rng = np.random.default_rng(600)
+    k = 20000
+    a, b, c = rng.normal(size=(3, k, 3))
+    p = rng.normal(size=(k, 3)) * 2
+    b[::50] = a[::50]
+    c[::50] = a[::50] + 1e-3
+    c[1::50] = a[1::50] + 0.5 * (b[1::50] - a[1::50])
+    a[2::50] = b[2::50] = c[2::50]
+    p[3::50] = a[3::50]
+    p[4::50] = 0.5 * (a[4::50] + b[4::50])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ref = _triangles_reference(p, a, b, c)
+    got = closest_on_triangles(p, a, b, c)
+    assert np.array_equal(got, ref, equal_nan=True)
+    assert np.array_equal(np.signbit(got), np.signbit(ref))
+    # known answers: above the interior, beyond a vertex, beside an edge
+    tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    q = np.array([[0.2, 0.2, 3.0], [-1.0, -1.0, 0.0], [0.5, -2.0, 1.0]])
+    got = closest_on_triangles(q, tri[0], tri[1], tri[2])
+    assert np.allclose(got, [[0.2, 0.2, 0.0], [0.0, 0.0, 0.0], [0.5, 0.0, 0.0]])
+
+
 def test_kernels_refuse_indices_out_of_range():
     # the compiled loops do not check bounds: the wrappers must
     with pytest.raises(ValueError, match="res holds indices outside"):
