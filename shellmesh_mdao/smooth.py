@@ -452,7 +452,11 @@ def polylines_from_edges(points, edges) -> list:
     e = e[e[:, 0] != e[:, 1]]
     if not len(e):
         return []
-    n = int(e.max()) + 1
+    # the graph on the edges' own nodes, renumbered in order (a member's few edges among a
+    # mesh's many nodes): the same chains, walks and order as on the mesh's numbering
+    used, inv = np.unique(e, return_inverse=True)
+    e = inv.reshape(-1, 2)
+    n = len(used)
     deg = np.bincount(e.ravel(), minlength=n)
     brk = deg != 2
     # duplicate every break node once per incident edge, so components are simple paths/cycles
@@ -465,7 +469,7 @@ def polylines_from_edges(points, edges) -> list:
     elab = lab[node_id[0::2]]
     first_edge = np.full(ncomp, k, np.int64)
     np.minimum.at(first_edge, elab, np.arange(k))
-    orig = np.concatenate([np.arange(n), he_node])         # graph node -> mesh node
+    orig = used[np.concatenate([np.arange(n), he_node])]   # graph node -> mesh node
     out = []
     for c in np.argsort(first_edge, kind="stable"):
         if first_edge[c] >= k:

@@ -208,6 +208,18 @@ def test_curve_and_polylines():
     assert got == [((0, 1, 2), False), ((2, 3), False), ((2, 4), False), ((5, 6, 7), True)]
 
 
+def test_polylines_do_not_depend_on_the_node_numbering():
+    # the chains are found on the edges' own nodes: spreading the same graph over a larger
+    # numbering (a member's chain among a whole mesh's nodes) by an increasing map must give
+    # the same polylines, mapped, in the same order
+    rng = np.random.default_rng(3)
+    edges = np.array([[0, 1], [1, 2], [2, 3], [2, 4], [5, 6], [6, 7], [7, 5], [8, 9], [9, 10], [10, 8], [10, 11]])
+    ref = polylines_from_edges(np.zeros((12, 3)), edges)
+    spread = np.sort(rng.choice(100_000, 12, replace=False))
+    got = polylines_from_edges(np.zeros((100_000, 3)), spread[edges[rng.permutation(len(edges))]])
+    assert [(ix.tolist(), cl) for ix, cl in got] == [(spread[ix].tolist(), cl) for ix, cl in ref]
+
+
 @pytest.mark.parametrize("scan", [0, 40, 512])
 def test_curve_set_matches_each_curve_bit_for_bit(scan, monkeypatch):
     """CurveSet answers every curve in one query and must give exactly what each Curve gives on
