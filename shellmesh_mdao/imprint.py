@@ -112,15 +112,7 @@ def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs) -> np.ndarray:
     qi = np.repeat(np.arange(len(q)), cnt)
     si = np.concatenate([np.asarray(c, np.int64) for c in cand])
     keep = seg_arc[si] == qa[qi]
-    qi, si = qi[keep], si[keep]
-    L2 = np.einsum("ij,ij->i", ab[si], ab[si])
-    t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    x = a[si] + t[:, None] * ab[si]
-    dist = norm_rows(x - q[qi], axis=1)
-    order = np.lexsort((si, dist, qi))
-    first = np.ones(len(order), bool)
-    first[1:] = qi[order][1:] != qi[order][:-1]
-    return x[order[first]]
+    return _pick_segments(q, qi[keep], si[keep], a, ab)[0]
 
 
 def _tri_angles_min(P, T):
@@ -1764,6 +1756,14 @@ def _closest_on_segments(q, a, b, full: bool = False):
     cnt = np.fromiter((len(c) for c in cand), np.int64, len(cand))
     qi = np.repeat(np.arange(len(q)), cnt)
     si = np.concatenate([np.asarray(c, np.int64) for c in cand])
+    x, dist, si, t = _pick_segments(q, qi, si, a, ab)
+    return (x, dist, si, t) if full else (x, dist)
+
+
+def _pick_segments(q, qi, si, a, ab):
+    """Per query ``q[qi]`` (every query listed), the nearest of its candidate segments ``si``
+    (``a + t ab``; ties: the lowest segment): ``(points, distances, segments, t)`` in query
+    order."""
     L2 = np.einsum("ij,ij->i", ab[si], ab[si])
     t = np.clip(np.einsum("ij,ij->i", q[qi] - a[si], ab[si]) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
     x = a[si] + t[:, None] * ab[si]
@@ -1772,9 +1772,7 @@ def _closest_on_segments(q, a, b, full: bool = False):
     first = np.ones(len(order), bool)
     first[1:] = qi[order][1:] != qi[order][:-1]
     o = order[first]
-    if full:
-        return x[o], dist[o], si[o], t[o]
-    return x[o], dist[o]
+    return x[o], dist[o], si[o], t[o]
 
 
 def _min_angles_small(X):
