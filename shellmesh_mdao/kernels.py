@@ -589,13 +589,15 @@ def _closest_on_triangles(P, A, B, C):
             out[i, 0], out[i, 1], out[i, 2] = b[0], b[1], b[2]
         elif d6 >= 0 and d5 <= d6:                                # vertex c
             out[i, 0], out[i, 1], out[i, 2] = c[0], c[1], c[2]
-        elif vc <= 0 and d1 >= 0 and d3 <= 0:                     # edge ab
+        # an edge of zero length (a repeated corner: its denominator is |e|^2 = 0) is no region
+        # of its own; the numpy version returned 0 / 0 = NaN there, the next region answers here
+        elif vc <= 0 and d1 >= 0 and d3 <= 0 and d1 - d3 != 0:    # edge ab
             v = d1 / (d1 - d3)
             out[i, 0], out[i, 1], out[i, 2] = a[0] + v * ab0, a[1] + v * ab1, a[2] + v * ab2
-        elif vb <= 0 and d2 >= 0 and d6 <= 0:                     # edge ac
+        elif vb <= 0 and d2 >= 0 and d6 <= 0 and d2 - d6 != 0:    # edge ac
             w = d2 / (d2 - d6)
             out[i, 0], out[i, 1], out[i, 2] = a[0] + w * ac0, a[1] + w * ac1, a[2] + w * ac2
-        elif va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:       # edge bc
+        elif va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0 and (d4 - d3) + (d5 - d6) != 0:   # edge bc
             w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
             out[i, 0] = b[0] + w * (c[0] - b[0])
             out[i, 1] = b[1] + w * (c[1] - b[1])
@@ -632,7 +634,9 @@ def closest_on_triangles(p, a, b, c):
     """Closest point of triangle ``(a[i], b[i], c[i])`` to ``p[i]`` (all (k, 3)): the same bits
     as the numpy version of :func:`shellmesh_mdao.project.closest_point_on_triangles` (Ericson's
     regions in the same order, numpy's sums of three products, the degenerate fallback onto
-    the nearest edge), one pass per point."""
+    the nearest edge), one pass per point, except where that version returned NaN: an edge of
+    zero length is skipped as a region, so a triangle with a repeated corner gets the closest
+    point of its other edges."""
     p, a, b, c = (np.ascontiguousarray(x, dtype=np.float64) for x in np.broadcast_arrays(
         *(np.asarray(x, dtype=np.float64) for x in (p, a, b, c))))
     if p.ndim != 2 or p.shape[1] != 3:
