@@ -478,14 +478,20 @@ def _min_corner_sj(P, faces, is_tri, nref, use_ref, tri_scale):
 
 
 def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
-    """Per element ``faces`` (m, 4; a triangle's fourth entry is not read) of the points ``P``:
+    """Per element ``faces`` ((m, 4), a triangle's fourth entry not read; or (m, 3), triangles
+    only) of the points ``P``:
     the smallest corner scaled Jacobian, ``(e_prev x e_next) . n / (|e_prev| |e_next|)``, against
     the element's own unit normal and, when ``nref`` (m, 3) is given, against that normal too
     (the smaller); triangles times ``tri_scale`` (1 = equilateral). The same bits as the numpy
     version (:func:`shellmesh_mdao.smooth._corner_min_sj` on the corners and
     ``_corner_normals``), whose sums of three products it repeats in numpy's order."""
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
-    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 4)
+    faces = np.asarray(faces, dtype=np.int64)
+    if faces.ndim != 2 or faces.shape[1] not in (3, 4):
+        raise ValueError(f"faces must be an (m, 3) or (m, 4) array, got shape {faces.shape}")
+    if faces.shape[1] == 3:                               # triangles only: the -1 padded layout
+        faces = np.column_stack([faces, np.full(len(faces), -1, np.int64)])
+    faces = np.ascontiguousarray(faces)
     is_tri = np.ascontiguousarray(is_tri, dtype=np.bool_).reshape(-1)
     if len(is_tri) != len(faces):
         raise ValueError("is_tri must have one entry per face")

@@ -246,6 +246,11 @@ def test_min_corner_sj_known_values():
     assert got[2] < 0                                    # the dart's reflex corner
     up = np.tile([0.0, 0.0, 1.0], (3, 1))
     assert np.allclose(min_corner_sj(P, faces[:2], np.array([False, True]), -up[:2]), -1.0)   # against a flipped reference
+    # a triangle-only (m, 3) array is the same as its -1 padded (m, 4) form
+    tri3 = np.array([[0, 1, 4], [0, 2, 3]])
+    pad = np.column_stack([tri3, [-1, -1]])
+    yes = np.array([True, True])
+    assert np.array_equal(min_corner_sj(P, tri3, yes), min_corner_sj(P, pad, yes))
 
 
 def test_ortho_jacobian_of_a_right_angle_is_zero():
@@ -426,6 +431,8 @@ def test_kernels_refuse_indices_out_of_range():
         ortho_jacobian([0], [1], [2], [[0.0, 0, 1]], one, one, one, [0, 1, 2], [1, 1, 2], np.eye(3))
     with pytest.raises(ValueError, match="faces holds indices outside"):
         min_corner_sj(np.eye(3), np.array([[0, 1, 3, -1]]), np.array([True]))
+    with pytest.raises(ValueError, match="an \\(m, 3\\) or \\(m, 4\\) array"):
+        min_corner_sj(np.eye(3), np.array([0, 1, 2]), np.array([True]))
     with pytest.raises(ValueError, match="faces holds indices outside"):
         min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([False]))   # a quad needs its fourth node
     with pytest.raises(ValueError, match="keys holds indices outside"):
