@@ -1,4 +1,5 @@
-"""Compiled kernels (numba) for the loops numpy cannot vectorise.
+"""Compiled kernels (numba) for the loops numpy cannot vectorise, and for the small
+per-element formulas that the stages evaluate thousands of times.
 
 Everything else in the package is numpy on whole arrays. A few steps are sequential by
 nature: a greedy independent set is built sub-round by sub-round, and each sub-round
@@ -6,10 +7,17 @@ depends on the one before. Written in numpy, every sub-round filters and gathers
 entries of every candidate still in play. On a 1.5M-triangle input that was most of the
 remesh's time. Here the same result comes from one pass over the entries.
 
+The others replace whole-array formulas whose temporaries and per-call overhead cost more
+than the arithmetic: counting sorts for the stable argsorts of vertex ids, the smoothing's
+orthogonality Jacobian and gradient, the elements' corner scaled Jacobians, and the closest
+points on curves and triangles. Where numpy sums three products (einsum, row norms) the
+loops sum them in numpy's order.
+
 The functions are compiled on first use and cached on disk next to this file (numba's
 ``cache=True``; :func:`warm_up` does it ahead). Every result is the same, bit for bit, as
-the numpy code it replaces (the tests compare the two). The compiled loops do not check
-bounds, so the Python wrappers check every index before handing it over.
+the numpy code it replaces (the tests compare the two; the one exception is documented at
+:func:`closest_on_triangles`). The compiled loops do not check bounds, so the Python
+wrappers check every index before handing it over.
 """
 from __future__ import annotations
 
