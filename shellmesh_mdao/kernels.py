@@ -287,6 +287,7 @@ def common_neighbour_counts(nptr, nbr, u, v):
         raise ValueError(f"u and v need the same length, got {len(u)} and {len(v)}")
     return _common(nptr, nbr, u, v, len(nptr) - 1)
 
+
 # ============================================================================ smoothing
 @njit(cache=True, nogil=True)
 def _ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv):
@@ -351,26 +352,32 @@ def ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv):
     col_start[v] + ncol[v] - 1`` with tangent vectors ``tv`` (k, 3). Rows ``3 q .. 3 q + 2``
     hold ``M_role @ tv[col] * sw[q]`` for every column of the three vertices, columns sorted
     (the canonical CSR that scipy builds from the same entries, value for value)."""
-    a, b, c = (np.ascontiguousarray(x, dtype=np.int64) for x in (a, b, c))
     col_start = np.ascontiguousarray(col_start, dtype=np.int64)
     ncol = np.ascontiguousarray(ncol, dtype=np.int64)
     tv = np.ascontiguousarray(tv, dtype=np.float64).reshape(-1, 3)
     nv = len(col_start)
-    for name, x in (("a", a), ("b", b), ("c", c)):
-        _check_index(name, x, nv)
+    a, b, c, n, su, sv, sw = _corners(a, b, c, n, su, sv, sw, nv)
     if len(ncol) != nv or (len(ncol) and (ncol.min() < 0 or ncol.max() > 3)):
         raise ValueError("ncol must give 0 to 3 columns for each vertex of col_start")
     own = ncol > 0
     if own.any() and (col_start[own].min() < 0 or (col_start + ncol)[own].max() > len(tv)):
         raise ValueError(f"the columns of col_start/ncol must lie in 0..{len(tv) - 1} (rows of tv)")
+    return _ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv)
+
+
+def _corners(a, b, c, n, su, sv, w, nv):
+    """The corner arrays of the orthogonality kernels, contiguous and checked: vertex ids
+    ``a``, ``b``, ``c`` in [0, nv), and one normal and three factors per corner."""
+    a, b, c = (np.ascontiguousarray(v, dtype=np.int64).reshape(-1) for v in (a, b, c))
     m = len(a)
-    if len(b) != m or len(c) != m:
-        raise ValueError("a, b and c must have one entry per corner")
-    f = [np.ascontiguousarray(x, dtype=np.float64).reshape(-1) for x in (su, sv, sw)]
+    f = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (su, sv, w)]
     n = np.ascontiguousarray(n, dtype=np.float64).reshape(-1, 3)
-    if len(n) != m or any(len(x) != m for x in f):
-        raise ValueError("n, su, sv and sw must have one entry per corner")
-    return _ortho_jacobian(a, b, c, n, f[0], f[1], f[2], col_start, ncol, tv)
+    if len(b) != m or len(c) != m or len(n) != m or any(len(v) != m for v in f):
+        raise ValueError("a, b, c, n, su, sv and w must have one entry per corner")
+    for name, v in (("a", a), ("b", b), ("c", c)):
+        _check_index(name, v, nv)
+    return a, b, c, n, f[0], f[1], f[2]
+
 
 @njit(cache=True, nogil=True)
 def _ortho_gradient(a, b, c, n, su, sv, w, x, nv):
@@ -408,19 +415,12 @@ def ortho_gradient(a, b, c, n, su, sv, w, x, nv):
     :func:`ortho_jacobian` (``a``, ``b``, ``c``, ``n``, ``su``, ``sv`` as there). The same
     bits as the numpy version of :meth:`~shellmesh_mdao.smooth._Ortho.gradient`: each role's
     terms summed over the corners in order (``np.bincount``), then the three roles added."""
-    a, b, c = (np.ascontiguousarray(v, dtype=np.int64).reshape(-1) for v in (a, b, c))
     x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
     nv = int(nv)
     if len(x) != nv:
         raise ValueError(f"x must hold the nv = {nv} positions")
-    m = len(a)
-    f = [np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (su, sv, w)]
-    n = np.ascontiguousarray(n, dtype=np.float64).reshape(-1, 3)
-    if len(b) != m or len(c) != m or len(n) != m or any(len(v) != m for v in f):
-        raise ValueError("a, b, c, n, su, sv and w must have one entry per corner")
-    for name, v in (("a", a), ("b", b), ("c", c)):
-        _check_index(name, v, nv)
-    return _ortho_gradient(a, b, c, n, f[0], f[1], f[2], x, nv)
+    a, b, c, n, su, sv, w = _corners(a, b, c, n, su, sv, w, nv)
+    return _ortho_gradient(a, b, c, n, su, sv, w, x, nv)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -562,6 +562,15 @@ def _dot3(x0, x1, x2, y0, y1, y2):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _clip01(t):
+    """np.clip(t, 0, 1): (t > 0 ? t : 0) < 1 ? .. : 1; a NaN stays."""
+    if t == t:
+        t = t if t > 0.0 else 0.0
+        t = t if t < 1.0 else 1.0
+    return t
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _on_segment(p, s, e, out):
     """Closest point of the segment s-e to ``p``: ``s + clip(t, 0, 1) (e - s)``, t = 0 on a
     zero-length segment."""
@@ -570,9 +579,7 @@ def _on_segment(p, s, e, out):
     t = 0.0
     if L2 > 0:
         t = _dot3(p[0] - s[0], p[1] - s[1], p[2] - s[2], d0, d1, d2) / L2
-    if t == t:
-        t = t if t > 0.0 else 0.0
-        t = t if t < 1.0 else 1.0
+    t = _clip01(t)
     out[0], out[1], out[2] = s[0] + t * d0, s[1] + t * d1, s[2] + t * d2
 
 
@@ -670,16 +677,11 @@ def _closest_on_curves(q, cid, start, stop, a, ab, L):
         best, bs = np.inf, -1
         bx0 = bx1 = bx2 = np.nan
         for s in range(start[cid[i]], stop[cid[i]]):
-            # numpy's einsum("ij,ij->i") over three: (x0*y0 + x2*y2) + x1*y1
-            d0, d1, d2 = q0 - a[s, 0], q1 - a[s, 1], q2 - a[s, 2]
-            t = (d0 * ab[s, 0] + d2 * ab[s, 2]) + d1 * ab[s, 1]
-            t = t / (L[s] * L[s])
-            if t == t:                      # np.clip: (t > 0 ? t : 0) < 1 ? .. : 1; NaN stays
-                t = t if t > 0.0 else 0.0
-                t = t if t < 1.0 else 1.0
+            t = _dot3(q0 - a[s, 0], q1 - a[s, 1], q2 - a[s, 2], ab[s, 0], ab[s, 1], ab[s, 2])
+            t = _clip01(t / (L[s] * L[s]))
             x0, x1, x2 = a[s, 0] + t * ab[s, 0], a[s, 1] + t * ab[s, 1], a[s, 2] + t * ab[s, 2]
             e0, e1, e2 = x0 - q0, x1 - q1, x2 - q2
-            d = np.sqrt((e0 * e0 + e2 * e2) + e1 * e1)
+            d = np.sqrt(_dot3(e0, e1, e2, e0, e1, e2))
             # nearest, then the lowest segment; a NaN distance (a zero-length segment) only
             # when nothing else is there, as lexsort puts NaN last
             if bs < 0 or d < best or (best != best and d == d):

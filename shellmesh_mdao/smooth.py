@@ -63,7 +63,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import closest_on_curves, min_corner_sj
+from .kernels import closest_on_curves, min_corner_sj, ortho_gradient, ortho_jacobian
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -980,7 +980,6 @@ class _Ortho:
     def gradient(self, x, n):
         """(n, 3) gradient of 1/2 sum w |r|^2 at positions x (a compiled loop,
         :func:`~shellmesh_mdao.kernels.ortho_gradient`)."""
-        from .kernels import ortho_gradient
         return ortho_gradient(self.a, self.b, self.c, self.n, self.su, self.sv, self.w, x, n)
 
     def block_trace(self, n):
@@ -995,7 +994,6 @@ class _Ortho:
         """Hessian J_T^T W J_T in the reduced coordinates: vertex v owns columns
         ``col_start[v] .. col_start[v] + ncol[v] - 1`` with tangent vectors ``tv`` (k, 3).
         The Jacobian is built by a compiled loop (:func:`~shellmesh_mdao.kernels.ortho_jacobian`)."""
-        from .kernels import ortho_jacobian
         m = len(self.b)
         if not m or not (np.asarray(ncol) > 0).any():
             return sparse.csr_matrix((k, k))
