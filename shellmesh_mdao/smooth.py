@@ -1265,8 +1265,9 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
             D = _solve_kkt(K3, rho_v, n, g, supports, T, owner)
         else:
             D = (T @ lin.solve(-(T.T @ g))).reshape(n, 3)
-        # trust region: distance to the nearest other vertex
-        dn, _ = cKDTree(P).query(P[movable], k=2)
+        # trust region: distance to the nearest other vertex (a distance does not depend on
+        # the tree's layout nor on the threads answering: the cheapest build, every core)
+        dn, _ = cKDTree(P, balanced_tree=False, compact_nodes=False).query(P[movable], k=2, workers=-1)
         r = trust * dn[:, 1]
         Dm = D[movable]
         L = _norm(Dm)
