@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import greedy_independent, stable_pair_order
+from .kernels import corner_cosines, greedy_independent, stable_pair_order
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
@@ -1377,13 +1377,10 @@ def _ranges(starts, stops):
 
 def _angles3(Pn):
     """Smallest interior angle (degrees) of triangles given by corner coordinates (t, 3, 3)."""
-    a, b, c = Pn[:, 0], Pn[:, 1], Pn[:, 2]
-
-    def ang(u, v):
-        cu = np.einsum("ij,ij->i", u, v) / np.maximum(norm_rows(u, axis=1) * norm_rows(v, axis=1), 1e-300)
-        return np.degrees(np.arccos(np.clip(cu, -1, 1)))
-
-    return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
+    # the cosines from a compiled loop (einsum's dot over max(|u| |v|, 1e-300)), the angles
+    # from numpy's arccos
+    ang = np.degrees(np.arccos(np.clip(corner_cosines(Pn), -1, 1)))
+    return np.minimum(np.minimum(ang[:, 0], ang[:, 1]), ang[:, 2])
 
 
 def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain: float = 0.5,

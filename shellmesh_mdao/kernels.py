@@ -26,7 +26,8 @@ from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "min_corner_sj", "closest_on_curves", "closest_on_triangles", "stable_order",
-           "stable_pair_order", "warm_up"]
+           "stable_pair_order", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
+           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -665,6 +666,238 @@ def closest_on_triangles(p, a, b, c):
     return _closest_on_triangles(p, a, b, c)
 
 
+# ============================================================================ rows of three
+# The per-row vector formulas of the remesh, the imprint and the smoother, called thousands of
+# times a run on a few hundred to a few thousand rows, where numpy's per-call overhead and
+# temporaries cost more than the arithmetic. Each takes C-contiguous float64 arrays from its
+# wrapper (which sends anything else to numpy) and does numpy's arithmetic in numpy's order.
+@njit(cache=True, nogil=True, inline="always")
+def _dot3e(x0, x1, x2, y0, y1, y2):
+    """einsum's sum of three products, sign of zero included: einsum adds the sum to an output
+    that starts at +0, so a sum of negative zeros comes out +0 (which arctan2 tells apart)."""
+    return _dot3(x0, x1, x2, y0, y1, y2) + 0.0
+
+
+@njit(cache=True, nogil=True)
+def _cross_rows(a, b):
+    k = a.shape[0]
+    out = np.empty((k, 3))
+    for i in range(k):
+        out[i, 0] = a[i, 1] * b[i, 2] - a[i, 2] * b[i, 1]
+        out[i, 1] = a[i, 2] * b[i, 0] - a[i, 0] * b[i, 2]
+        out[i, 2] = a[i, 0] * b[i, 1] - a[i, 1] * b[i, 0]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _norm_rows(a):
+    k = a.shape[0]
+    out = np.empty(k)
+    for i in range(k):
+        x, y, z = a[i, 0], a[i, 1], a[i, 2]
+        out[i] = np.sqrt(x * x + y * y + z * z)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _dot_rows(a, b):
+    k = a.shape[0]
+    out = np.empty(k)
+    for i in range(k):
+        out[i] = _dot3e(a[i, 0], a[i, 1], a[i, 2], b[i, 0], b[i, 1], b[i, 2])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _dot_norm_rows(a):
+    k = a.shape[0]
+    out = np.empty(k)
+    for i in range(k):
+        out[i] = np.sqrt(_dot3e(a[i, 0], a[i, 1], a[i, 2], a[i, 0], a[i, 1], a[i, 2]))
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _dot_unit_rows(a):
+    k = a.shape[0]
+    out = np.zeros((k, 3))
+    for i in range(k):
+        n = np.sqrt(_dot3e(a[i, 0], a[i, 1], a[i, 2], a[i, 0], a[i, 1], a[i, 2]))
+        if n > 0:
+            out[i, 0], out[i, 1], out[i, 2] = a[i, 0] / n, a[i, 1] / n, a[i, 2] / n
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _tri_normals(P, F):
+    k = F.shape[0]
+    out = np.empty((k, 3))
+    for i in range(k):
+        a, b, c = F[i, 0], F[i, 1], F[i, 2]
+        u0, u1, u2 = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
+        v0, v1, v2 = P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2]
+        out[i, 0] = u1 * v2 - u2 * v1
+        out[i, 1] = u2 * v0 - u0 * v2
+        out[i, 2] = u0 * v1 - u1 * v0
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _sin_cos(u0, u1, u2, v0, v1, v2):
+    """(|u x v|, u . v) with numpy's sums (einsum order for both)."""
+    c0 = u1 * v2 - u2 * v1
+    c1 = u2 * v0 - u0 * v2
+    c2 = u0 * v1 - u1 * v0
+    return np.sqrt(_dot3e(c0, c1, c2, c0, c1, c2)), _dot3e(u0, u1, u2, v0, v1, v2)
+
+
+@njit(cache=True, nogil=True)
+def _corner_sin_cos(A, B, C):
+    k = A.shape[0]
+    out = np.empty((4, k))
+    for i in range(k):
+        out[0, i], out[1, i] = _sin_cos(B[i, 0] - A[i, 0], B[i, 1] - A[i, 1], B[i, 2] - A[i, 2],
+                                        C[i, 0] - A[i, 0], C[i, 1] - A[i, 1], C[i, 2] - A[i, 2])
+        out[2, i], out[3, i] = _sin_cos(C[i, 0] - B[i, 0], C[i, 1] - B[i, 1], C[i, 2] - B[i, 2],
+                                        A[i, 0] - B[i, 0], A[i, 1] - B[i, 1], A[i, 2] - B[i, 2])
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _corner_cosines(X):
+    k = X.shape[0]
+    out = np.empty((k, 3))
+    for i in range(k):
+        for j in range(3):
+            # corner 0: (b - a, c - a); corner 1: (a - b, c - b); corner 2: (a - c, b - c)
+            p = j
+            q = 1 if j == 0 else 0
+            r = 1 if j == 2 else 2
+            u0, u1, u2 = X[i, q, 0] - X[i, p, 0], X[i, q, 1] - X[i, p, 1], X[i, q, 2] - X[i, p, 2]
+            v0, v1, v2 = X[i, r, 0] - X[i, p, 0], X[i, r, 1] - X[i, p, 1], X[i, r, 2] - X[i, p, 2]
+            den = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2) * np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+            if den < 1e-300:                      # np.maximum(den, 1e-300): a NaN stays
+                den = 1e-300
+            out[i, j] = _dot3e(u0, u1, u2, v0, v1, v2) / den
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _facing_ok(F, kind, vtri, tri_n, nrm, cos_facing):
+    k = F.shape[0]
+    out = np.empty(k, np.bool_)
+    for i in range(k):
+        any_reg = False
+        best = -2.0
+        nan = False
+        for j in range(3):
+            v = F[i, j]
+            if kind[v] == 0 and vtri[v] >= 0:
+                any_reg = True
+                t = vtri[v]
+                d = _dot3e(nrm[i, 0], nrm[i, 1], nrm[i, 2], tri_n[t, 0], tri_n[t, 1], tri_n[t, 2])
+                if d != d:
+                    nan = True
+                elif d > best:
+                    best = d
+        out[i] = (not any_reg) or ((not nan) and best > cos_facing)
+    return out
+
+
+def _rows3(a):
+    """``a`` as a C-contiguous float64 (k, 3) array, or None when it is not one (other dtype or
+    shape: the caller falls back on numpy)."""
+    if not isinstance(a, np.ndarray) or a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != 3:
+        return None
+    return np.ascontiguousarray(a)
+
+
+def cross_rows(a, b):
+    """Row-wise cross product of two (k, 3) float64 arrays (``mesh.cross_rows``'s bits); None
+    for any other input (the caller uses numpy)."""
+    a3, b3 = _rows3(a), _rows3(b)
+    if a3 is None or b3 is None or a3.shape != b3.shape:
+        return None
+    return _cross_rows(a3, b3)
+
+
+def norm_rows(a):
+    """``sqrt((x*x + y*y) + z*z)`` of each row of a (k, 3) float64 array (``mesh.norm_rows``);
+    None for any other input."""
+    a3 = _rows3(a)
+    return None if a3 is None else _norm_rows(a3)
+
+
+def dot_rows(a, b):
+    """``np.einsum("ij,ij->i", a, b)`` of two (k, 3) float64 arrays, the same bits; None for
+    any other input."""
+    a3, b3 = _rows3(a), _rows3(b)
+    if a3 is None or b3 is None or a3.shape != b3.shape:
+        return None
+    return _dot_rows(a3, b3)
+
+
+def dot_norm_rows(a):
+    """``np.sqrt(np.einsum("ij,ij->i", a, a))`` of a (k, 3) float64 array; None otherwise."""
+    a3 = _rows3(a)
+    return None if a3 is None else _dot_norm_rows(a3)
+
+
+def dot_unit_rows(a):
+    """Rows of a (k, 3) float64 array divided by :func:`dot_norm_rows`, zero rows where that
+    norm is not positive (``np.divide(a, n, out=zeros, where=n > 0)``); None otherwise."""
+    a3 = _rows3(a)
+    return None if a3 is None else _dot_unit_rows(a3)
+
+
+def triangle_normals(P, F):
+    """Unnormalised normals ``cross(P[F1] - P[F0], P[F2] - P[F0])`` of triangles ``F`` (k, >=3),
+    the bits of ``mesh.cross_rows`` on the gathered corners."""
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    F = np.ascontiguousarray(np.asarray(F)[:, :3], dtype=np.int64)
+    _check_index("F", F, len(P))
+    return _tri_normals(P, F)
+
+
+def corner_sin_cos(A, B, C):
+    """For triangles with corners ``A``, ``B``, ``C`` (k, 3): a (4, k) array of ``|u x v|`` and
+    ``u . v`` at corner A (u = B - A, v = C - A) and at corner B (u = C - B, v = A - B), with
+    the bits of ``norm(cross_rows(u, v))`` and ``einsum("ij,ij->i", u, v)`` (the arguments of
+    the remesh's ``arctan2`` angles)."""
+    A, B, C = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (A, B, C))
+    if not (len(A) == len(B) == len(C)):
+        raise ValueError("corner_sin_cos takes three (k, 3) arrays of the same length")
+    return _corner_sin_cos(A, B, C)
+
+
+def corner_cosines(X):
+    """(k, 3) cosines of the corner angles of triangles with corners ``X`` (k, 3, 3): at corner
+    j, ``u . v / max(|u| |v|, 1e-300)`` with u, v the sides to the next and the previous corner
+    (einsum's dot and ``norm_rows``' norms, the imprint's formula)."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    if X.ndim != 3 or X.shape[1:] != (3, 3):
+        raise ValueError("corner_cosines takes a (k, 3, 3) array of triangle corners")
+    return _corner_cosines(X)
+
+
+def facing_ok(F, kind, vtri, tri_n, nrm, cos_facing):
+    """Per face ``F[i]`` (k, 3) with unit normal ``nrm[i]``: True unless the face has a corner
+    v with ``kind[v] == 0`` and ``vtri[v] >= 0`` and, at every such corner, ``nrm[i] .
+    tri_n[vtri[v]]`` is not above ``cos_facing`` (a NaN there counts as not above). The bits
+    of the remesh's einsum formula."""
+    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
+    kind = np.ascontiguousarray(kind, dtype=np.int64)
+    vtri = np.ascontiguousarray(vtri, dtype=np.int64)
+    tri_n = np.ascontiguousarray(tri_n, dtype=np.float64).reshape(-1, 3)
+    nrm = np.ascontiguousarray(nrm, dtype=np.float64).reshape(-1, 3)
+    if len(nrm) != len(F) or len(vtri) != len(kind):
+        raise ValueError("facing_ok: one normal per face and one kind per vertex triangle")
+    _check_index("F", F, len(kind))
+    if len(vtri) and vtri.max(initial=-1) >= len(tri_n):
+        raise ValueError(f"facing_ok: vertex triangles must be below {len(tri_n)}")
+    return _facing_ok(F, kind, vtri, tri_n, nrm, float(cos_facing))
+
+
 # ============================================================================ curves
 @njit(cache=True, nogil=True, error_model="numpy")
 def _closest_on_curves(q, cid, start, stop, a, ab, L):
@@ -734,4 +967,14 @@ def warm_up() -> float:
     stable_pair_order(np.array([1, 0]), np.array([0, 1]), 2)
     closest_on_triangles(np.ones((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.eye(3)[1:2])
     closest_on_curves(np.zeros((1, 3)), [0], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [np.sqrt(3.0)])
+    e = np.eye(3)
+    cross_rows(e, e)
+    norm_rows(e)
+    dot_rows(e, e)
+    dot_norm_rows(e)
+    dot_unit_rows(e)
+    triangle_normals(e, np.array([[0, 1, 2]]))
+    corner_sin_cos(e[:1], e[1:2], e[2:])
+    corner_cosines(e[None])
+    facing_ok(np.array([[0, 1, 2]]), np.zeros(3, np.int64), np.zeros(3, np.int64), e, e[:1], 0.5)
     return time.perf_counter() - t0

@@ -27,6 +27,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from . import kernels as _k
 from .errors import MeshValidationError
 
 __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces",
@@ -36,7 +37,12 @@ __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product over the last axis (length 3) of broadcastable arrays: the same arithmetic
     as ``np.cross`` (so the same bits) without its axis handling, which costs more than the
-    product itself on the small batches of the remesher, the imprint and the smoother."""
+    product itself on the small batches of the remesher, the imprint and the smoother. Two
+    (k, 3) float64 arrays go to a compiled loop (:func:`~shellmesh_mdao.kernels.cross_rows`,
+    the same arithmetic)."""
+    out = _k.cross_rows(a, b)
+    if out is not None:
+        return out
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
     np.subtract(a[..., 1] * b[..., 2], a[..., 2] * b[..., 1], out=out[..., 0])
     np.subtract(a[..., 2] * b[..., 0], a[..., 0] * b[..., 2], out=out[..., 1])
@@ -51,6 +57,9 @@ def norm_rows(a, axis: int = -1, keepdims: bool = False) -> np.ndarray:
     (tests/test_mesh.py checks the equality on shapes, strides, magnitudes and special values.)"""
     a = np.asarray(a)
     if a.dtype == np.float64 and a.ndim >= 1 and a.shape[-1] == 3 and axis in (-1, a.ndim - 1):
+        if a.ndim == 2:                                  # (k, 3): the compiled loop, same sum
+            out = _k.norm_rows(a)
+            return out[:, None] if keepdims else out
         x, y, z = a[..., 0], a[..., 1], a[..., 2]
         out = np.sqrt(x * x + y * y + z * z)
         return out[..., None] if keepdims else out

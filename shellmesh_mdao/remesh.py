@@ -38,7 +38,8 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (common_neighbour_counts, greedy_independent, greedy_independent_rings, stable_order,
+from .kernels import (common_neighbour_counts, corner_sin_cos, dot_norm_rows, dot_rows, dot_unit_rows, facing_ok,
+                      triangle_normals, greedy_independent, greedy_independent_rings, stable_order,
                       stable_pair_order)
 from .mesh import ShellMesh, cross_rows
 from .project import SurfaceLocator, closest_point_on_triangles
@@ -58,41 +59,46 @@ _REGULAR, _CHAIN, _CORNER = 0, 1, 2
 
 
 # ============================================================================ small kernels
+# (k, 3) float64 rows go to compiled loops with numpy's arithmetic (kernels.dot_rows & co.);
+# anything else to numpy
 def _norm(a):
-    return np.sqrt(np.einsum("ij,ij->i", a, a))
+    out = dot_norm_rows(a)
+    return np.sqrt(np.einsum("ij,ij->i", a, a)) if out is None else out
 
 
 def _unit(a):
-    n = _norm(a)
-    return np.divide(a, n[:, None], out=np.zeros_like(a), where=n[:, None] > 0)
+    out = dot_unit_rows(a)
+    if out is None:
+        n = _norm(a)
+        out = np.divide(a, n[:, None], out=np.zeros_like(a), where=n[:, None] > 0)
+    return out
 
 
 def _dot(a, b):
-    return np.einsum("ij,ij->i", a, b)
+    out = dot_rows(a, b)
+    return np.einsum("ij,ij->i", a, b) if out is None else out
 
 
 def _tri_normals(P, F):
     """Unnormalised normals (twice the area vectors) of triangles ``F``."""
-    return cross_rows(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    return triangle_normals(P, F)
 
 
 def _tri_min_angle(A, B, C):
-    """Smallest interior angle (degrees) of triangles with corners A, B, C (k, 3)."""
-    def ang(u, v):
-        return np.arctan2(_norm(cross_rows(u, v)), _dot(u, v))
-    a0 = ang(B - A, C - A)
-    a1 = ang(C - B, A - B)
+    """Smallest interior angle (degrees) of triangles with corners A, B, C (k, 3): the angles
+    at A and B are ``arctan2(|u x v|, u . v)`` (numpy's arctan2 on the compiled loop's
+    arguments), the third is what remains of pi."""
+    sc = corner_sin_cos(A, B, C)
+    a0 = np.arctan2(sc[0], sc[1])
+    a1 = np.arctan2(sc[2], sc[3])
     return np.degrees(np.minimum(np.minimum(a0, a1), np.pi - a0 - a1))
 
 
 def _tri_angles(P, F):
     """(m, 3) interior angles in degrees."""
-    A, B, C = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
-
-    def ang(u, v):
-        return np.degrees(np.arctan2(_norm(cross_rows(u, v)), _dot(u, v)))
-    a0 = ang(B - A, C - A)
-    a1 = ang(C - B, A - B)
+    sc = corner_sin_cos(P[F[:, 0]], P[F[:, 1]], P[F[:, 2]])
+    a0 = np.degrees(np.arctan2(sc[0], sc[1]))
+    a1 = np.degrees(np.arctan2(sc[2], sc[3]))
     return np.stack([a0, a1, 180.0 - a0 - a1], 1)
 
 
@@ -953,10 +959,7 @@ def _facing_ok(W, ctx, Fn, nrm):
     """Faces (k, 3) with unit normals ``nrm``: True unless the face has regular corners and
     its normal is more than 80 degrees from the input normal at every one of them (a face
     standing across the surface, e.g. through a thin wing from the upper to the lower skin)."""
-    reg = (W.kind[Fn] == _REGULAR) & (W.vtri[Fn] >= 0)
-    tn = ctx.tri_n[np.maximum(W.vtri[Fn], 0)]                    # (k, 3, 3)
-    d = np.einsum("kj,kij->ki", nrm, tn)
-    return ~reg.any(1) | (np.where(reg, d, -2.0).max(1) > _COS_FACING)
+    return facing_ok(Fn, W.kind, W.vtri, ctx.tri_n, nrm, _COS_FACING)
 
 
 def _micro_round(W, ctx, eps):

@@ -443,3 +443,150 @@ def test_kernels_refuse_indices_out_of_range():
         closest_on_curves(np.zeros((1, 3)), [1], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [1.0])
     with pytest.raises(ValueError, match="segment range"):
         closest_on_curves(np.zeros((1, 3)), [0], [0], [2], np.zeros((1, 3)), np.ones((1, 3)), [1.0])
+
+
+# ------------------------------------------------------------------ rows of three
+def _rows(rng, k, special=True):
+    """(k, 3) rows over twelve orders of magnitude, with zero rows, signed zeros, NaN and inf."""
+    a = rng.normal(size=(k, 3)) * 10.0 ** rng.uniform(-6, 6, (k, 1))
+    if special and k >= 8:
+        a[0] = 0.0
+        a[1] = [-0.0, 0.0, -0.0]
+        a[2, 1] = np.nan
+        a[3, 0] = np.inf
+        a[4] = [1e-170, -1e-170, 1e-170]              # squares underflow
+        a[5] = [1e160, 1e160, -1e160]                 # squares overflow
+        a[6] = 0.0                                    # times a row of -1 below: three products of -0
+        a[7] = -1.0
+    return a
+
+
+def _same(x, y):
+    """Equal arrays, NaN where NaN, and the same sign of every zero."""
+    x, y = np.asarray(x), np.asarray(y)
+    assert x.shape == y.shape
+    np.testing.assert_array_equal(x, y)
+    assert np.array_equal(np.signbit(x), np.signbit(y))
+
+
+@pytest.mark.parametrize("k", [0, 1, 7, 8, 9, 31, 1000, 4099])
+def test_row_kernels_give_numpy_bits(k):
+    from shellmesh_mdao import kernels as K
+
+    rng = np.random.default_rng(k)
+    a, b = _rows(rng, k), _rows(rng, k)
+    if k >= 8:
+        b[6] = a[7]                                   # einsum's sum of -0 products is +0
+    with np.errstate(all="ignore"):
+        _same(K.dot_rows(a, b), np.einsum("ij,ij->i", a, b))
+        _same(K.dot_rows(b, a), np.einsum("ij,ij->i", b, a))
+        _same(K.dot_norm_rows(a), np.sqrt(np.einsum("ij,ij->i", a, a)))
+        n = np.sqrt(np.einsum("ij,ij->i", a, a))[:, None]
+        _same(K.dot_unit_rows(a), np.divide(a, n, out=np.zeros_like(a), where=n > 0))
+        _same(K.norm_rows(a), np.linalg.norm(a, axis=1))
+        _same(K.cross_rows(a, b), np.cross(a, b))
+        # strided and non-float64 inputs: strided ones are copied, others are left to numpy
+        w = np.hstack([a, b])
+        _same(K.dot_rows(w[:, :3], w[:, 3:]), np.einsum("ij,ij->i", w[:, :3], w[:, 3:]))
+        _same(K.cross_rows(a[::-1], b), np.cross(a[::-1], b))
+    assert K.dot_rows(a[:20].clip(-1, 1).astype(np.float32), b[:20]) is None
+    assert K.cross_rows(a[:, :2], b[:, :2]) is None
+    assert K.norm_rows(a[None]) is None
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_mesh_helpers_keep_their_bits_through_the_kernels(seed):
+    """mesh.cross_rows and mesh.norm_rows send (k, 3) rows to the kernels and anything else to
+    numpy: both ways give np.cross's and np.linalg.norm's bits."""
+    from shellmesh_mdao.mesh import norm_rows
+
+    rng = np.random.default_rng(seed)
+    a, b = _rows(rng, 500), _rows(rng, 500)
+    with np.errstate(all="ignore"):
+        _same(cross_rows(a, b), np.cross(a, b))
+        _same(cross_rows(a.reshape(50, 10, 3), b.reshape(50, 10, 3)), np.cross(a.reshape(50, 10, 3), b.reshape(50, 10, 3)))
+        _same(cross_rows(a, b[0]), np.cross(a, b[0]))                  # broadcast: numpy
+        _same(norm_rows(a, axis=1), np.linalg.norm(a, axis=1))
+        _same(norm_rows(a, axis=1, keepdims=True), np.linalg.norm(a, axis=1, keepdims=True))
+        _same(norm_rows(a.reshape(50, 10, 3), axis=-1), np.linalg.norm(a.reshape(50, 10, 3), axis=-1))
+
+
+def _old_tri_min_angle(A, B, C):
+    def ang(u, v):
+        return np.arctan2(np.sqrt(np.einsum("ij,ij->i", np.cross(u, v), np.cross(u, v))),
+                          np.einsum("ij,ij->i", u, v))
+    a0 = ang(B - A, C - A)
+    a1 = ang(C - B, A - B)
+    return np.degrees(np.minimum(np.minimum(a0, a1), np.pi - a0 - a1))
+
+
+def _old_angles3(Pn):
+    a, b, c = Pn[:, 0], Pn[:, 1], Pn[:, 2]
+
+    def ang(u, v):
+        cu = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1), 1e-300)
+        return np.degrees(np.arccos(np.clip(cu, -1, 1)))
+    return np.minimum(np.minimum(ang(b - a, c - a), ang(a - b, c - b)), ang(a - c, b - c))
+
+
+@pytest.mark.parametrize("k", [1, 5, 8, 13, 64, 999, 5000])
+def test_triangle_angle_kernels_give_the_numpy_angles(k):
+    """The remesh's and the imprint's triangle angles, from the compiled arguments and numpy's
+    arctan2 / arccos, equal the whole-numpy formulas they replaced (every array length,
+    since numpy's vector loops treat the tail of an array apart)."""
+    from shellmesh_mdao import kernels as K
+    from shellmesh_mdao.imprint import _angles3
+    from shellmesh_mdao.remesh import _tri_angles, _tri_min_angle, _tri_normals
+
+    rng = np.random.default_rng(100 + k)
+    P = rng.normal(size=(3 * k, 3)) * 10.0 ** rng.uniform(-3, 3)
+    F = rng.permutation(3 * k).reshape(k, 3)
+    if k >= 5:
+        P[F[0, 1]] = P[F[0, 0]]                          # a repeated corner
+        P[F[1, 2]] = 0.5 * (P[F[1, 0]] + P[F[1, 1]])     # a flat triangle
+    A, B, C = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
+    with np.errstate(all="ignore"):
+        _same(_tri_min_angle(A, B, C), _old_tri_min_angle(A, B, C))
+        u, v, w = B - A, C - A, np.cross(B - A, C - A)
+        a0 = np.degrees(np.arctan2(np.sqrt(np.einsum("ij,ij->i", w, w)), np.einsum("ij,ij->i", u, v)))
+        _same(_tri_angles(P, F)[:, 0], a0)
+        _same(_tri_normals(P, F), np.cross(B - A, C - A))
+        _same(_angles3(P[F]), _old_angles3(P[F]))
+    # known answers: a right isosceles triangle and an equilateral one
+    R = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    np.testing.assert_allclose(_tri_angles(R, np.array([[0, 1, 2]]))[0], [90, 45, 45], atol=1e-12)
+    Eq = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, np.sqrt(3) / 2, 0]])
+    np.testing.assert_allclose(_angles3(Eq[None]), [60.0], atol=1e-12)
+    np.testing.assert_allclose(K.corner_cosines(R[None])[0], [0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-15)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_facing_ok_matches_the_einsum_test(seed):
+    from shellmesh_mdao import kernels as K
+
+    rng = np.random.default_rng(seed)
+    n, m, k = 60, 40, 300
+    kind = rng.integers(0, 3, n)
+    vtri = rng.integers(-1, m, n)
+    tri_n = rng.normal(size=(m, 3))
+    tri_n /= np.linalg.norm(tri_n, axis=1)[:, None]
+    tri_n[3] = np.nan                                     # a NaN normal: the face is not ok
+    F = rng.integers(0, n, (k, 3))
+    nrm = rng.normal(size=(k, 3))
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    c = np.cos(np.radians(80.0))
+    reg = (kind[F] == 0) & (vtri[F] >= 0)
+    d = np.einsum("kj,kij->ki", nrm, tri_n[np.maximum(vtri[F], 0)])
+    want = ~reg.any(1) | (np.where(reg, d, -2.0).max(1) > c)
+    got = K.facing_ok(F, kind, vtri, tri_n, nrm, c)
+    assert got.dtype == bool and np.array_equal(got, want)
+    assert not want.all() and want.any()
+    # a face of only chain/corner vertices is always ok; one facing its surface is, one
+    # standing across it is not
+    one = np.array([[0, 1, 2]])
+    z = np.array([[0.0, 0.0, 1.0]])
+    assert K.facing_ok(one, [1, 2, 1], [0, 0, 0], z, -z, c)[0]
+    assert K.facing_ok(one, [0, 0, 0], [0, 0, 0], z, z, c)[0]
+    assert not K.facing_ok(one, [0, 0, 0], [0, 0, 0], z, np.array([[1.0, 0.0, 0.0]]), c)[0]
+    with pytest.raises(ValueError):
+        K.facing_ok(one, [0, 0, 0], [0, 0, 5], z, z, c)
