@@ -27,7 +27,7 @@ from numba import njit
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "min_corner_sj", "closest_on_curves", "closest_on_triangles", "stable_order",
            "stable_pair_order", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "warm_up"]
+           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -804,6 +804,172 @@ def _facing_ok(F, kind, vtri, tri_n, nrm, cos_facing):
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _min_nan(cur, v):
+    """np.minimum(cur, v) for comparisons: a NaN on either side wins."""
+    if cur != cur:
+        return cur
+    if v != v or v < cur:
+        return v
+    return cur
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
+    any_reg = False
+    best = -2.0
+    nan = False
+    for v in (q0, q1, q2):
+        if kind[v] == 0 and vtri[v] >= 0:
+            any_reg = True
+            t = vtri[v]
+            d = _dot3e(n0, n1, n2, tri_n[t, 0], tri_n[t, 1], tri_n[t, 2])
+            if d != d:
+                nan = True
+            elif d > best:
+                best = d
+    return (not any_reg) or ((not nan) and best > cos_facing)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _collapse_tests(a, b, okd, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri,
+                    tri_n, cos_facing):
+    k = a.shape[0]
+    rmax = np.zeros(k)
+    ok = okd.copy()
+    n_old = 0
+    n_new = 0
+    for i in range(k):                                   # the edge-length test; face counts
+        if not ok[i]:
+            continue
+        ai, bi = a[i], b[i]
+        r_max = 0.0
+        for p in range(nptr[ai], nptr[ai + 1]):
+            x = nbr[p]
+            if x == bi:
+                continue
+            d0, d1, d2 = P[x, 0] - P[bi, 0], P[x, 1] - P[bi, 1], P[x, 2] - P[bi, 2]
+            r = np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2)) / (0.5 * (h[x] + h[bi]))
+            if r_max == r_max and (r != r or r > r_max):
+                r_max = r
+        rmax[i] = r_max
+        if not r_max <= max_len_ratio:
+            ok[i] = False
+            continue
+        for p in range(fptr[ai], fptr[ai + 1]):
+            f = vf[p]
+            n_old += 1
+            if F[f, 0] != bi and F[f, 1] != bi and F[f, 2] != bi:
+                n_new += 1
+    own_old = np.empty(n_old, np.int64)
+    sc_old = np.empty((4, n_old))
+    own_new = np.empty(n_new, np.int64)
+    sc_new = np.empty((4, n_new))
+    io = 0
+    jn = 0
+    for i in range(k):                                   # normal turn, facing; the angles' arguments
+        if not ok[i]:
+            continue
+        ai, bi = a[i], b[i]
+        cmin = np.inf
+        facing = True
+        hb2 = 1e-30 * (h[bi] * h[bi])
+        for p in range(fptr[ai], fptr[ai + 1]):
+            f = vf[p]
+            c0, c1, c2 = F[f, 0], F[f, 1], F[f, 2]
+            A, B, C = P[c0], P[c1], P[c2]
+            sc_old[0, io], sc_old[1, io] = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2],
+                                                    C[0] - A[0], C[1] - A[1], C[2] - A[2])
+            sc_old[2, io], sc_old[3, io] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2],
+                                                    A[0] - B[0], A[1] - B[1], A[2] - B[2])
+            own_old[io] = i
+            io += 1
+            if c0 == bi or c1 == bi or c2 == bi:
+                continue
+            q0 = bi if c0 == ai else c0
+            q1 = bi if c1 == ai else c1
+            q2 = bi if c2 == ai else c2
+            A, B, C = P[q0], P[q1], P[q2]
+            u0, u1, u2 = B[0] - A[0], B[1] - A[1], B[2] - A[2]
+            v0, v1, v2 = C[0] - A[0], C[1] - A[1], C[2] - A[2]
+            n0 = u1 * v2 - u2 * v1
+            n1 = u2 * v0 - u0 * v2
+            n2 = u0 * v1 - u1 * v0
+            area = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
+            if area > 0:
+                n0, n1, n2 = n0 / area, n1 / area, n2 / area
+            else:
+                n0 = n1 = n2 = 0.0
+            cosn = _dot3e(n0, n1, n2, fn_old[f, 0], fn_old[f, 1], fn_old[f, 2])
+            cmin = _min_nan(cmin, cosn if area > hb2 else -2.0)
+            if not _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
+                facing = False
+            sc_new[0, jn], sc_new[1, jn] = _sin_cos(u0, u1, u2, v0, v1, v2)
+            sc_new[2, jn], sc_new[3, jn] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2],
+                                                    A[0] - B[0], A[1] - B[1], A[2] - B[2])
+            own_new[jn] = i
+            jn += 1
+        if not (cmin > cos_turn and facing):
+            ok[i] = False
+    return rmax, ok, own_old, sc_old, own_new, sc_new
+
+
+class CollapseTests:
+    """The remesh's geometric tests of collapsing a vertex ``a[i]`` into ``b[i]``, each pair on
+    its own, up to the angles, on one state of the mesh (its arrays are checked once, here;
+    the sub-rounds of a selection then call the object with their pairs):
+
+    - ``rmax``: the largest ratio of a new edge to the mean local size ``h`` of its ends,
+      allowed up to ``max_len_ratio``;
+    - no face around ``a`` that keeps its area turning its unit normal away from ``fn_old`` to
+      a cosine of ``cos_turn`` or less;
+    - no new face standing across the input (:func:`facing_ok` with ``kind``, ``vtri``,
+      ``tri_n``, ``cos_facing``).
+
+    ``tests(a, b, okd)`` returns ``(rmax, ok, own_old, sc_old, own_new, sc_new)``: ``ok`` the
+    pairs (among ``okd``) passing those tests and, for every pair that passed the length test,
+    the :func:`corner_sin_cos` arguments (4, m) of its faces around ``a`` before the collapse
+    (``own_old``: their pair) and after it (``own_new``), for numpy's ``arctan2``. The bits of
+    the numpy formulas of ``remesh._collapse_edges``."""
+
+    def __init__(self, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n,
+                 cos_facing):
+        def i64(x):
+            return np.ascontiguousarray(x, dtype=np.int64)
+
+        def f64(x):
+            return np.ascontiguousarray(x, dtype=np.float64)
+        self.nptr, self.nbr, self.fptr, self.vf, self.kind, self.vtri = (
+            i64(x) for x in (nptr, nbr, fptr, vf, kind, vtri))
+        self.F = i64(F).reshape(-1, 3)
+        self.P, self.fn_old, self.tri_n = (f64(x).reshape(-1, 3) for x in (P, fn_old, tri_n))
+        self.h = f64(h)
+        n = len(self.P)
+        if len(self.nptr) != n + 1 or len(self.fptr) != n + 1 or len(self.h) != n or len(self.kind) != n \
+                or len(self.vtri) != n or len(self.fn_old) != len(self.F):
+            raise ValueError("CollapseTests: arrays of mismatched lengths")
+        _check_csr(self.nptr, self.nbr)
+        if self.fptr[0] != 0 or self.fptr[-1] != len(self.vf) or (np.diff(self.fptr) < 0).any():
+            raise ValueError("fptr must be CSR row pointers into vf")
+        _check_index("vf", self.vf, len(self.F))
+        _check_index("F", self.F, n)
+        if len(self.vtri) and self.vtri.max(initial=-1) >= len(self.tri_n):
+            raise ValueError(f"CollapseTests: vertex triangles must be below {len(self.tri_n)}")
+        self.max_len_ratio, self.cos_turn, self.cos_facing = float(max_len_ratio), float(cos_turn), float(cos_facing)
+
+    def __call__(self, a, b, okd):
+        a = np.ascontiguousarray(a, dtype=np.int64)
+        b = np.ascontiguousarray(b, dtype=np.int64)
+        okd = np.ascontiguousarray(okd, dtype=np.bool_)
+        if not (len(a) == len(b) == len(okd)):
+            raise ValueError("CollapseTests: a, b and okd must have the same length")
+        _check_index("a", a, len(self.h))
+        _check_index("b", b, len(self.h))
+        return _collapse_tests(a, b, okd, self.nptr, self.nbr, self.fptr, self.vf, self.F, self.P, self.h,
+                               self.max_len_ratio, self.fn_old, self.cos_turn, self.kind, self.vtri, self.tri_n,
+                               self.cos_facing)
+
+
 def _rows3(a):
     """``a`` as a C-contiguous float64 (k, 3) array, or None when it is not one (other dtype or
     shape: the caller falls back on numpy)."""
@@ -977,4 +1143,7 @@ def warm_up() -> float:
     corner_sin_cos(e[:1], e[1:2], e[2:])
     corner_cosines(e[None])
     facing_ok(np.array([[0, 1, 2]]), np.zeros(3, np.int64), np.zeros(3, np.int64), e, e[:1], 0.5)
+    CollapseTests(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]), np.zeros(3, np.int64),
+                  np.array([[0, 1, 2]]), e, np.ones(3), 2.0, e[2:], 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64),
+                  e, 0.2)(np.array([0]), np.array([1]), np.array([True]))
     return time.perf_counter() - t0

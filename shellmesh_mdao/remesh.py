@@ -38,7 +38,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (common_neighbour_counts, corner_sin_cos, dot_norm_rows, dot_rows, dot_unit_rows, facing_ok,
+from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, dot_norm_rows, dot_rows, dot_unit_rows, facing_ok,
                       triangle_normals, greedy_independent, greedy_independent_rings, stable_order,
                       stable_pair_order)
 from .mesh import ShellMesh, cross_rows
@@ -88,7 +88,12 @@ def _tri_min_angle(A, B, C):
     """Smallest interior angle (degrees) of triangles with corners A, B, C (k, 3): the angles
     at A and B are ``arctan2(|u x v|, u . v)`` (numpy's arctan2 on the compiled loop's
     arguments), the third is what remains of pi."""
-    sc = corner_sin_cos(A, B, C)
+    return _min_angle_of(corner_sin_cos(A, B, C))
+
+
+def _min_angle_of(sc):
+    """Smallest angle (degrees) of triangles from the (4, k) :func:`~.kernels.corner_sin_cos`
+    arguments of their first two corners."""
     a0 = np.arctan2(sc[0], sc[1])
     a1 = np.arctan2(sc[2], sc[3])
     return np.degrees(np.minimum(np.minimum(a0, a1), np.pi - a0 - a1))
@@ -1231,6 +1236,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         return 0
     fn_old = _unit(_tri_normals(P, F))
     cos_turn = np.cos(np.radians(max_normal_turn))
+    tests = None
 
     def allowed_only(a, b, okd):
         """:func:`geometric` run on the pairs ``okd`` allows only, inf for the others (they get
@@ -1265,6 +1271,20 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
                 badf[chk] = _dot(nn[chk], ctx.tri_n[ti]) <= 0
             bad = np.bincount(ow, weights=badf, minlength=k) > 0
             return np.where(okd & ~bad, _norm(P[a] - P[b]), np.inf)
+        if not quality:
+            # the length, normal-turn and facing tests and the angles' arguments in one compiled
+            # pass (kernels.CollapseTests), the angles from numpy's arctan2
+            nonlocal tests
+            if tests is None:
+                tests = CollapseTests(nptr, nbr, fptr, vf, F, P, W.h, max_len_ratio, fn_old, cos_turn, W.kind,
+                                      W.vtri, ctx.tri_n, _COS_FACING)
+            rmax, okd, own_old, sc_old, own_new, sc_new = tests(a, b, okd)
+            amin_old = np.full(k, np.inf)
+            np.minimum.at(amin_old, own_old, _min_angle_of(sc_old))
+            amin_new = np.full(k, np.inf)
+            np.minimum.at(amin_new, own_new, _min_angle_of(sc_new))
+            okd &= amin_new >= np.minimum(5.0, 0.5 * amin_old)
+            return np.where(okd, rmax, np.inf)
         ow, pos = _expand(nptr, a)
         xx = nbr[pos]
         m = xx != b[ow]

@@ -590,3 +590,109 @@ def test_facing_ok_matches_the_einsum_test(seed):
     assert not K.facing_ok(one, [0, 0, 0], [0, 0, 0], z, np.array([[1.0, 0.0, 0.0]]), c)[0]
     with pytest.raises(ValueError):
         K.facing_ok(one, [0, 0, 0], [0, 0, 5], z, z, c)
+
+
+def _old_collapse_geometric(a, b, okd, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri,
+                            tri_n, cos_facing):
+    """The numpy formulas of remesh._collapse_edges' geometric tests (non-quality mode) before
+    the kernel, on the pairs the length test allows."""
+    from shellmesh_mdao.remesh import _expand, _norm, _tri_min_angle, _unit
+
+    k = len(a)
+    okd = okd.copy()
+    ow, pos = _expand(nptr, a)
+    xx = nbr[pos]
+    m = xx != b[ow]
+    ow, xx = ow[m], xx[m]
+    r = _norm(P[xx] - P[b[ow]]) / (0.5 * (h[xx] + h[b[ow]]))
+    rmax = np.zeros(k)
+    np.maximum.at(rmax, ow, r)
+    okd &= rmax <= max_len_ratio
+    keep = np.flatnonzero(okd)
+    out = np.full(k, np.inf)
+    if not len(keep):
+        return out
+    a, b, rmax = a[keep], b[keep], rmax[keep]
+    k2 = len(keep)
+    ok2 = np.ones(k2, bool)
+    ow, pos = _expand(fptr, a)
+    ff = vf[pos]
+    Fa = F[ff]
+    Q0 = P[Fa]
+    amin_old = np.full(k2, np.inf)
+    np.minimum.at(amin_old, ow, _tri_min_angle(Q0[:, 0], Q0[:, 1], Q0[:, 2]))
+    m = ~(Fa == b[ow][:, None]).any(1)
+    ow, ff, Fa, Q = ow[m], ff[m], Fa[m], Q0[m]
+    isa = Fa == a[ow][:, None]
+    Q = np.where(isa[:, :, None], P[b[ow]][:, None, :], Q)
+    nn = np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
+    area = _norm(nn)
+    cosn = np.einsum("ij,ij->i", _unit(nn), fn_old[ff])
+    cmin = np.full(k2, np.inf)
+    np.minimum.at(cmin, ow, np.where(area > 1e-30 * h[b[ow]] ** 2, cosn, -2.0))
+    ok2 &= cmin > cos_turn
+    Fb = np.where(isa, b[ow][:, None], Fa)
+    reg = (kind[Fb] == 0) & (vtri[Fb] >= 0)
+    d = np.einsum("kj,kij->ki", _unit(nn), tri_n[np.maximum(vtri[Fb], 0)])
+    facing = ~reg.any(1) | (np.where(reg, d, -2.0).max(1) > cos_facing)
+    ok2 &= ~(np.bincount(ow, weights=~facing, minlength=k2) > 0)
+    amin_new = np.full(k2, np.inf)
+    np.minimum.at(amin_new, ow, _tri_min_angle(Q[:, 0], Q[:, 1], Q[:, 2]))
+    ok2 &= amin_new >= np.minimum(5.0, 0.5 * amin_old)
+    out[keep] = np.where(ok2, rmax, np.inf)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_collapse_tests_match_the_numpy_formulas(seed):
+    """kernels.CollapseTests plus numpy's arctan2 give the remesh's collapse scores (the
+    longest new edge over the local size, inf where a test fails) of the numpy formulas it
+    replaced, on a wavy, jittered grid with every edge offered in both directions."""
+    from shellmesh_mdao.kernels import CollapseTests
+    from shellmesh_mdao.remesh import _Topo, _min_angle_of, _tri_normals, _unit
+
+    rng = np.random.default_rng(seed)
+    nx = 14
+    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
+    g += rng.uniform(-0.3, 0.3, g.shape)
+    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
+    idx = np.arange(nx * nx).reshape(nx, nx)
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    flip = rng.random(len(q)) < 0.5
+    F = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
+                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    n = len(P)
+    T = _Topo(F, n)
+    nptr, nbr = T.vertex_neighbors()
+    fptr, vf = T.vertex_faces(F)
+    h = rng.uniform(0.8, 1.6, n)
+    h[3] = np.nan                                        # a NaN size fails its collapses
+    fn_old = _unit(_tri_normals(P, F))
+    kind = rng.integers(0, 3, n)
+    tri_n = fn_old[rng.permutation(len(F))] * rng.choice([-1.0, 1.0], (len(F), 1))   # some faces stand across
+    vtri = rng.integers(-1, len(F), n)
+    E = T.E
+    a = np.concatenate([E[:, 0], E[:, 1]])
+    b = np.concatenate([E[:, 1], E[:, 0]])
+    okd = rng.random(len(a)) < 0.9
+    # a node on top of its neighbour: collapses next to it make faces of zero area
+    P[idx[5, 5]] = P[idx[5, 6]]
+    cos_facing = np.cos(np.radians(80.0))
+    for turn in (45.0, 120.0):                           # past 90 degrees only the area guard refuses
+        cos_turn = np.cos(np.radians(turn))
+        tests = CollapseTests(nptr, nbr, fptr, vf, F, P, h, 4.0 / 3.0, fn_old, cos_turn, kind, vtri, tri_n,
+                              cos_facing)
+        rmax, ok, own_old, sc_old, own_new, sc_new = tests(a, b, okd)
+        amin_old = np.full(len(a), np.inf)
+        np.minimum.at(amin_old, own_old, _min_angle_of(sc_old))
+        amin_new = np.full(len(a), np.inf)
+        np.minimum.at(amin_new, own_new, _min_angle_of(sc_new))
+        ok &= amin_new >= np.minimum(5.0, 0.5 * amin_old)
+        got = np.where(ok, rmax, np.inf)
+        want = _old_collapse_geometric(a, b, okd, nptr, nbr, fptr, vf, F, P, h, 4.0 / 3.0, fn_old, cos_turn,
+                                       kind, vtri, tri_n, cos_facing)
+        np.testing.assert_array_equal(got, want)
+        # allowed and refused collapses both occur
+        assert np.isfinite(got).sum() > 10 and (~np.isfinite(got) & okd).sum() > 50
+    with pytest.raises(ValueError):
+        tests(a, np.full(len(a), n), okd)
