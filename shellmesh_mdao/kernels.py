@@ -9,9 +9,13 @@ remesh's time. Here the same result comes from one pass over the entries.
 
 The others replace whole-array formulas whose temporaries and per-call overhead cost more
 than the arithmetic: counting sorts for the stable argsorts of vertex ids, the smoothing's
-orthogonality Jacobian and gradient, the elements' corner scaled Jacobians, and the closest
-points on curves and triangles. Where numpy sums three products (einsum, row norms) the
-loops sum them in numpy's order.
+orthogonality Jacobian and gradient, the elements' corner scaled Jacobians, the closest
+points on curves and triangles, the per-row vector formulas of the remesh, the imprint and
+the smoother ("rows of three"), and the remesh's collapse and flip tests. Where numpy sums
+three products (einsum, row norms) the loops sum them in numpy's order. Angles stay with
+numpy: the loops hand back the arguments of its ``arctan2`` and ``arccos`` (on a machine
+with AVX-512 numpy computes those with its own vector code, whose last bits differ from the
+C library's that a compiled loop would call).
 
 The functions are compiled on first use and cached on disk next to this file (numba's
 ``cache=True``; :func:`warm_up` does it ahead). Every result is the same, bit for bit, as
@@ -27,7 +31,7 @@ from numba import njit
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "min_corner_sj", "closest_on_curves", "closest_on_triangles", "stable_order",
            "stable_pair_order", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "warm_up"]
+           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -914,6 +918,78 @@ def _collapse_tests(a, b, okd, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_o
     return rmax, ok, own_old, sc_old, own_new, sc_new
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _unit_normal(a, b, c):
+    """Unit normal of triangle (a, b, c) (3-vectors): cross(b - a, c - a) over its einsum norm,
+    zero when that is not positive."""
+    u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    v0, v1, v2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    n0 = u1 * v2 - u2 * v1
+    n1 = u2 * v0 - u0 * v2
+    n2 = u0 * v1 - u1 * v0
+    L = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
+    if L > 0:
+        return n0 / L, n1 / L, n2 / L
+    return 0.0, 0.0, 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _tri_args(A, B, C, out, j, i):
+    """corner_sin_cos arguments of triangle (A, B, C) into out[j, :, i]."""
+    out[j, 0, i], out[j, 1, i] = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
+    out[j, 2, i], out[j, 3, i] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2], A[0] - B[0], A[1] - B[1], A[2] - B[2])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _flip_tests(a, b, c, d, P, cosmax, kind, vtri, tri_n, cos_facing):
+    k = a.shape[0]
+    ok = np.empty(k, np.bool_)
+    m0 = np.empty((k, 3))
+    m1 = np.empty((k, 3))
+    sc = np.empty((4, 4, k))
+    for i in range(k):
+        Pa, Pb, Pc, Pd = P[a[i]], P[b[i]], P[c[i]], P[d[i]]
+        x0, x1, x2 = _unit_normal(Pa, Pb, Pc)
+        y0, y1, y2 = _unit_normal(Pb, Pa, Pd)
+        g = _dot3e(x0, x1, x2, y0, y1, y2) > cosmax
+        p0, p1, p2 = _unit_normal(Pa, Pd, Pc)
+        q0, q1, q2 = _unit_normal(Pd, Pb, Pc)
+        m0[i, 0], m0[i, 1], m0[i, 2] = p0, p1, p2
+        m1[i, 0], m1[i, 1], m1[i, 2] = q0, q1, q2
+        g = g and _dot3e(p0, p1, p2, x0, x1, x2) > cosmax and _dot3e(p0, p1, p2, y0, y1, y2) > cosmax
+        g = g and _dot3e(q0, q1, q2, x0, x1, x2) > cosmax and _dot3e(q0, q1, q2, y0, y1, y2) > cosmax
+        g = g and _facing_one(a[i], d[i], c[i], kind, vtri, tri_n, p0, p1, p2, cos_facing)
+        g = g and _facing_one(d[i], b[i], c[i], kind, vtri, tri_n, q0, q1, q2, cos_facing)
+        ok[i] = g
+        _tri_args(Pa, Pb, Pc, sc, 0, i)
+        _tri_args(Pb, Pa, Pd, sc, 1, i)
+        _tri_args(Pa, Pd, Pc, sc, 2, i)
+        _tri_args(Pd, Pb, Pc, sc, 3, i)
+    return ok, m0, m1, sc
+
+
+def flip_tests(a, b, c, d, P, cosmax, kind, vtri, tri_n, cos_facing):
+    """The remesh's geometric tests of flipping edge a-b of the triangles (a, b, c) and
+    (b, a, d) to c-d, each flip on its own: the two old faces' unit normals within ``cosmax``
+    (a cosine) of each other and of both new faces' normals ``m0`` (of (a, d, c)) and ``m1``
+    (of (d, b, c)), and neither new face standing across the input (:func:`facing_ok`).
+    Returns ``(ok, m0, m1, sc)`` with ``sc`` (4, 4, k) the :func:`corner_sin_cos` arguments of
+    the triangles (a, b, c), (b, a, d), (a, d, c) and (d, b, c), for numpy's ``arctan2``. The
+    bits of the numpy formulas of ``remesh._flip_round``."""
+    a, b, c, d = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (a, b, c, d))
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    kind = np.ascontiguousarray(kind, dtype=np.int64)
+    vtri = np.ascontiguousarray(vtri, dtype=np.int64)
+    tri_n = np.ascontiguousarray(tri_n, dtype=np.float64).reshape(-1, 3)
+    if not (len(a) == len(b) == len(c) == len(d)) or len(kind) != len(P) or len(vtri) != len(P):
+        raise ValueError("flip_tests: a, b, c, d of one length; kind and vtri one per point")
+    for name, x in (("a", a), ("b", b), ("c", c), ("d", d)):
+        _check_index(name, x, len(P))
+    if len(vtri) and vtri.max(initial=-1) >= len(tri_n):
+        raise ValueError(f"flip_tests: vertex triangles must be below {len(tri_n)}")
+    return _flip_tests(a, b, c, d, P, float(cosmax), kind, vtri, tri_n, float(cos_facing))
+
+
 class CollapseTests:
     """The remesh's geometric tests of collapsing a vertex ``a[i]`` into ``b[i]``, each pair on
     its own, up to the angles, on one state of the mesh (its arrays are checked once, here;
@@ -1146,4 +1222,5 @@ def warm_up() -> float:
     CollapseTests(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]), np.zeros(3, np.int64),
                   np.array([[0, 1, 2]]), e, np.ones(3), 2.0, e[2:], 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64),
                   e, 0.2)(np.array([0]), np.array([1]), np.array([True]))
+    flip_tests([0], [1], [2], [0], e, 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64), e, 0.2)
     return time.perf_counter() - t0

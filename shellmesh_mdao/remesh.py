@@ -38,9 +38,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, dot_norm_rows, dot_rows, dot_unit_rows, facing_ok,
-                      triangle_normals, greedy_independent, greedy_independent_rings, stable_order,
-                      stable_pair_order)
+from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, dot_norm_rows, dot_rows, dot_unit_rows,
+                      facing_ok, flip_tests, greedy_independent, greedy_independent_rings, stable_order,
+                      stable_pair_order, triangle_normals)
 from .mesh import ShellMesh, cross_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -1424,24 +1424,18 @@ def _flip_round(W, ctx, mode):
     # does not depend on the others)
     keep = np.flatnonzero(ok)
     cand, a, b, c, d, f0, f1, ok = cand[keep], a[keep], b[keep], c[keep], d[keep], f0[keep], f1[keep], ok[keep]
-    Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
-    n0 = _unit(cross_rows(Pb - Pa, Pc - Pa))
-    n1 = _unit(cross_rows(Pa - Pb, Pd - Pb))
+    # in one compiled pass (kernels.flip_tests): the old pair nearly coplanar, the new pair not
+    # folded over the old one (both new faces turn by less than the allowed dihedral from both
+    # old faces) nor standing across the input; the angles' arguments of all four faces
     cosmax = np.cos(np.radians(ctx.max_flip_dihedral))
-    ok &= _dot(n0, n1) > cosmax
-    m0 = _unit(cross_rows(Pd - Pa, Pc - Pa))
-    m1 = _unit(cross_rows(Pb - Pd, Pc - Pd))
-    # the new pair must not fold over the old one (both new faces turn by less than the
-    # allowed dihedral from both old faces)
-    for mm in (m0, m1):
-        ok &= (_dot(mm, n0) > cosmax) & (_dot(mm, n1) > cosmax)
-    ok &= _facing_ok(W, ctx, np.stack([a, d, c], 1), m0) & _facing_ok(W, ctx, np.stack([d, b, c], 1), m1)
+    ok2, m0, m1, sc = flip_tests(a, b, c, d, P, cosmax, W.kind, W.vtri, ctx.tri_n, _COS_FACING)
+    ok &= ok2
     k2 = np.flatnonzero(ok)                  # and the angles only for the flips still allowed
     cand, a, b, c, d, f0, f1 = (x[k2] for x in (cand, a, b, c, d, f0, f1))
-    Pa, Pb, Pc, Pd, m0, m1 = (x[k2] for x in (Pa, Pb, Pc, Pd, m0, m1))
+    m0, m1, sc = m0[k2], m1[k2], sc[:, :, k2]
     keep, ok = keep[k2], ok[k2]
-    old = np.minimum(_tri_min_angle(Pa, Pb, Pc), _tri_min_angle(Pb, Pa, Pd))
-    new = np.minimum(_tri_min_angle(Pa, Pd, Pc), _tri_min_angle(Pd, Pb, Pc))
+    old = np.minimum(_min_angle_of(sc[0]), _min_angle_of(sc[1]))
+    new = np.minimum(_min_angle_of(sc[2]), _min_angle_of(sc[3]))
     if mode == "valence":
         gain = gain[keep]
         ok &= new >= 0.5 * old
@@ -1454,11 +1448,12 @@ def _flip_round(W, ctx, mode):
         # remeshing: the new edge must stay within max_deviation of the input, and the new
         # faces must face the way the input does where their centroids project
         k = np.flatnonzero(ok)
-        mid = 0.5 * (Pc[k] + Pd[k])
+        Pa, Pb, Pc, Pd = P[a[k]], P[b[k]], P[c[k]], P[d[k]]
+        mid = 0.5 * (Pc + Pd)
         _, _, dm = ctx.loc.closest(mid)
         good = dm <= ctx.delta
-        C0 = (Pa[k] + Pd[k] + Pc[k]) / 3.0
-        C1 = (Pd[k] + Pb[k] + Pc[k]) / 3.0
+        C0 = (Pa + Pd + Pc) / 3.0
+        C1 = (Pd + Pb + Pc) / 3.0
         _, t0, _ = ctx.loc.closest(C0)
         _, t1, _ = ctx.loc.closest(C1)
         good &= (_dot(m0[k], ctx.tri_n[t0]) > 0) & (_dot(m1[k], ctx.tri_n[t1]) > 0)

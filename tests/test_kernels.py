@@ -696,3 +696,43 @@ def test_collapse_tests_match_the_numpy_formulas(seed):
         assert np.isfinite(got).sum() > 10 and (~np.isfinite(got) & okd).sum() > 50
     with pytest.raises(ValueError):
         tests(a, np.full(len(a), n), okd)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_flip_tests_match_the_numpy_formulas(seed):
+    """kernels.flip_tests gives the remesh's flip tests and angle arguments of the numpy
+    formulas it replaced (dihedrals of the old and new pairs, facing), on random quadruples
+    of a wavy point set with coincident points and faces standing across."""
+    from shellmesh_mdao.kernels import flip_tests
+    from shellmesh_mdao.remesh import _min_angle_of, _unit
+
+    rng = np.random.default_rng(seed)
+    n, k = 80, 3000
+    P = rng.normal(size=(n, 3)) * [3.0, 3.0, 0.4]
+    P[7] = P[8]
+    a, b, c, d = (rng.integers(0, n, k) for _ in range(4))
+    kind = rng.integers(0, 3, n)
+    tri_n = _unit(rng.normal(size=(50, 3)) * [0.3, 0.3, 1.0])
+    tri_n[5] = np.nan
+    vtri = rng.integers(-1, 50, n)
+    cosmax, cos_facing = np.cos(np.radians(120.0)), np.cos(np.radians(80.0))
+    ok, m0, m1, sc = flip_tests(a, b, c, d, P, cosmax, kind, vtri, tri_n, cos_facing)
+    Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
+    with np.errstate(all="ignore"):
+        n0 = _unit(np.cross(Pb - Pa, Pc - Pa))
+        n1 = _unit(np.cross(Pa - Pb, Pd - Pb))
+        want = np.einsum("ij,ij->i", n0, n1) > cosmax
+        w0 = _unit(np.cross(Pd - Pa, Pc - Pa))
+        w1 = _unit(np.cross(Pb - Pd, Pc - Pd))
+        for mm in (w0, w1):
+            want &= (np.einsum("ij,ij->i", mm, n0) > cosmax) & (np.einsum("ij,ij->i", mm, n1) > cosmax)
+        for Fn, mm in ((np.stack([a, d, c], 1), w0), (np.stack([d, b, c], 1), w1)):
+            reg = (kind[Fn] == 0) & (vtri[Fn] >= 0)
+            dd = np.einsum("kj,kij->ki", mm, tri_n[np.maximum(vtri[Fn], 0)])
+            want &= ~reg.any(1) | (np.where(reg, dd, -2.0).max(1) > cos_facing)
+        np.testing.assert_array_equal(ok, want)
+        _same(m0, w0)
+        _same(m1, w1)
+        for j, (A, B, C) in enumerate(((Pa, Pb, Pc), (Pb, Pa, Pd), (Pa, Pd, Pc), (Pd, Pb, Pc))):
+            _same(_min_angle_of(sc[j]), _old_tri_min_angle(A, B, C))
+    assert 0.05 < ok.mean() < 0.95
