@@ -1185,6 +1185,14 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
                      mesh.feature_edge_ids)
 
 
+def _in_sorted(x, sorted_keys):
+    """``np.isin(x, sorted_keys)`` for a sorted key array (a binary search, no sort)."""
+    if not len(sorted_keys):
+        return np.zeros(len(x), bool)
+    i = np.minimum(np.searchsorted(sorted_keys, x), len(sorted_keys) - 1)
+    return sorted_keys[i] == x
+
+
 def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     """One round of angle-improving edge flips on an independent set of edges.
 
@@ -1201,17 +1209,17 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     same = np.flatnonzero(ks[1:] == ks[:-1])
     if not len(same):
         return T, 0
-    # keep only edges with exactly two half-edges
-    cnt = np.bincount(np.searchsorted(np.unique(ks), ks))
-    uk = np.unique(ks)
-    two = np.isin(ks[same], uk[cnt == 2])
-    same = same[two]
+    # keep only edges with exactly two half-edges (ks is sorted: its runs are the edges)
+    start = np.r_[True, ks[1:] != ks[:-1]]
+    uk = ks[start]
+    run = np.cumsum(start) - 1
+    cnt = np.diff(np.append(np.flatnonzero(start), len(ks)))
+    same = same[cnt[run[same]] == 2]
     h0, h1 = order[same], order[same + 1]
     ek = key[h0]
     if len(locked_edges):
         lk = np.sort(np.asarray(locked_edges), axis=1)
-        lk = lk[:, 0] * n + lk[:, 1]
-        free = ~np.isin(ek, lk)
+        free = ~_in_sorted(ek, np.sort(lk[:, 0] * n + lk[:, 1]))
         h0, h1, ek = h0[free], h1[free], ek[free]
     f0, s0 = h0 // 3, h0 % 3
     f1, s1 = h1 // 3, h1 % 3
@@ -1228,11 +1236,10 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0):
     new_key = np.minimum(r, s) * n + np.maximum(r, s)
     # the angle tests only for the pairs the dihedral and new-edge tests allow (each pair's
     # answer does not depend on the others)
-    pre = np.flatnonzero((cosd > np.cos(np.radians(max_dihedral))) & ~np.isin(new_key, uk))
+    pre = np.flatnonzero((cosd > np.cos(np.radians(max_dihedral))) & ~_in_sorted(new_key, uk))
     p, q, r, s, f0, f1, n0, n1, new_key = (x[pre] for x in (p, q, r, s, f0, f1, n0, n1, new_key))
     # (p, q, r) and (q, p, s) are the triangles f0 and f1 themselves, rotated: the same angles
-    tmin = _tri_angles_min(P, T)
-    old_min = np.minimum(tmin[f0], tmin[f1])
+    old_min = np.minimum(_tri_angles_min(P, T[f0]), _tri_angles_min(P, T[f1]))
     t0 = np.stack([r, s, q], 1)
     t1 = np.stack([s, r, p], 1)
     new_min = np.minimum(_tri_angles_min(P, t0), _tri_angles_min(P, t1))
