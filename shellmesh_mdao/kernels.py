@@ -30,7 +30,7 @@ from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "min_corner_sj", "closest_on_curves", "closest_on_triangles", "stable_order",
-           "stable_pair_order", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
+           "stable_pair_order", "edge_table", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
 
@@ -558,6 +558,56 @@ def stable_pair_order(lo, hi, n):
     _check_index("lo", lo, int(n))
     _check_index("hi", hi, int(n))
     return _pair_order(lo, hi, int(n))
+
+
+@njit(cache=True, nogil=True)
+def _edge_table(F, n):
+    m = F.shape[0]
+    lo = np.empty(3 * m, np.int64)
+    hi = np.empty(3 * m, np.int64)
+    for f in range(m):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            lo[3 * f + k] = a if a < b else b
+            hi[3 * f + k] = b if a < b else a
+    order = _pair_order(lo, hi, n)
+    nh = 3 * m
+    he_edge = np.empty(nh, np.int64)
+    ne = 0
+    for j in range(nh):
+        if j == 0 or lo[order[j]] != lo[order[j - 1]] or hi[order[j]] != hi[order[j - 1]]:
+            ne += 1
+        he_edge[order[j]] = ne - 1
+    h0 = np.empty(ne, np.int64)
+    h1 = np.full(ne, -1, np.int64)
+    cnt = np.zeros(ne, np.int64)
+    E = np.empty((ne, 2), np.int64)
+    keys = np.empty(ne, np.int64)
+    for j in range(nh):
+        h = order[j]
+        e = he_edge[h]
+        if cnt[e] == 0:
+            h0[e] = h
+            E[e, 0], E[e, 1] = lo[h], hi[h]
+            keys[e] = lo[h] * n + hi[h]
+        elif cnt[e] == 1:
+            h1[e] = h
+        cnt[e] += 1
+    for e in range(ne):
+        if cnt[e] != 2:
+            h1[e] = -1
+    return he_edge, h0, h1, cnt, E, keys
+
+
+def edge_table(F, n):
+    """Edge table of triangles ``F`` (m, 3) on ``n`` vertices, edges in the order of their keys
+    ``lo * n + hi``: ``(he_edge (3m,), h0, h1, valence, E (e, 2), keys)``, half-edge ``3 f + k``
+    running from ``F[f, k]`` to ``F[f, k + 1]``; ``h0`` the first half-edge of each edge (in
+    half-edge order), ``h1`` the second where the edge has exactly two, else -1. The arrays of
+    ``remesh._Topo``'s whole-array construction (stable sort of the keys, run starts)."""
+    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
+    _check_index("F", F, int(n))
+    return _edge_table(F, int(n))
 
 
 # ============================================================================ triangles
@@ -1223,4 +1273,5 @@ def warm_up() -> float:
                   np.array([[0, 1, 2]]), e, np.ones(3), 2.0, e[2:], 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64),
                   e, 0.2)(np.array([0]), np.array([1]), np.array([True]))
     flip_tests([0], [1], [2], [0], e, 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64), e, 0.2)
+    edge_table(np.array([[0, 1, 2]]), 3)
     return time.perf_counter() - t0

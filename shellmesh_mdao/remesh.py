@@ -39,8 +39,8 @@ from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
 from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, dot_norm_rows, dot_rows, dot_unit_rows,
-                      facing_ok, flip_tests, greedy_independent, greedy_independent_rings, stable_order,
-                      stable_pair_order, triangle_normals)
+                      edge_table, facing_ok, flip_tests, greedy_independent, greedy_independent_rings, stable_order,
+                      triangle_normals)
 from .mesh import ShellMesh, cross_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -146,31 +146,15 @@ class _Topo:
 
     def __init__(self, F, n, allow_nonmanifold=False):
         m = len(F)
-        a = F.reshape(-1)
-        b = F[:, [1, 2, 0]].reshape(-1)
-        lo = np.minimum(a, b)
-        hi = np.maximum(a, b)
-        key = lo * n + hi
-        order = stable_pair_order(lo, hi, n)
-        ks = key[order]
-        first = np.ones(len(ks), bool)
-        first[1:] = ks[1:] != ks[:-1]
-        starts = np.flatnonzero(first)
-        cnt = np.diff(np.append(starts, len(ks)))
+        # the keys lo * n + hi sorted stably, their runs the edges (kernels.edge_table)
+        self.he_edge, self.h0, self.h1, cnt, self.E, self.keys = edge_table(F, n)
         if len(cnt) and cnt.max() > 2 and not allow_nonmanifold:
-            bad = ks[starts[cnt > 2]][:3]
+            bad = self.keys[cnt > 2][:3]
             raise MeshValidationError(
                 f"the skin has {(cnt > 2).sum()} non-manifold edges (more than two triangles on one "
                 f"edge, first node pairs {[[int(k // n), int(k % n)] for k in bad]}): remeshing needs a "
                 "manifold skin; remove internal faces or duplicate shells from the input surface")
-        eid = np.cumsum(first) - 1
-        self.he_edge = np.empty(3 * m, dtype=np.int64)
-        self.he_edge[order] = eid
-        self.h0 = order[starts]
-        self.h1 = np.where(cnt == 2, order[np.minimum(starts + 1, len(order) - 1)], -1)
         self.nonmanifold = cnt > 2      # (allow_nonmanifold only) treated like boundaries
-        self.E = np.stack([lo[self.h0], hi[self.h0]], 1)
-        self.keys = ks[starts]
         self.valence = cnt
         self.n = n
         self.m = m

@@ -736,3 +736,36 @@ def test_flip_tests_match_the_numpy_formulas(seed):
         for j, (A, B, C) in enumerate(((Pa, Pb, Pc), (Pb, Pa, Pd), (Pa, Pd, Pc), (Pd, Pb, Pc))):
             _same(_min_angle_of(sc[j]), _old_tri_min_angle(A, B, C))
     assert 0.05 < ok.mean() < 0.95
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_edge_table_matches_the_sorted_key_runs(seed):
+    """kernels.edge_table gives remesh._Topo's arrays of the whole-array construction: a stable
+    sort of the half-edge keys and its runs (boundary, interior and, allowed, non-manifold edges)."""
+    from shellmesh_mdao.kernels import edge_table
+
+    rng = np.random.default_rng(seed)
+    n = 60
+    F = np.array([rng.choice(n, 3, replace=False) for _ in range(150)])
+    F = np.vstack([F, F[:5, [1, 0, 2]], F[:2]])          # some edges of three and four half-edges
+    m = len(F)
+    a = F.reshape(-1)
+    b = F[:, [1, 2, 0]].reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    first = np.r_[True, ks[1:] != ks[:-1]]
+    starts = np.flatnonzero(first)
+    cnt = np.diff(np.append(starts, len(ks)))
+    he_edge = np.empty(3 * m, np.int64)
+    he_edge[order] = np.cumsum(first) - 1
+    h0 = order[starts]
+    h1 = np.where(cnt == 2, order[np.minimum(starts + 1, len(order) - 1)], -1)
+    got = edge_table(F, n)
+    want = (he_edge, h0, h1, cnt, np.stack([lo[h0], hi[h0]], 1), ks[starts])
+    for g, w in zip(got, want):
+        assert np.array_equal(g, w)
+    assert {1, 2}.issubset(set(cnt.tolist())) and cnt.max() > 2
+    with pytest.raises(ValueError):
+        edge_table(F, 10)
