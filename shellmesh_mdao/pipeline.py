@@ -427,15 +427,16 @@ def stage_quad(state: PipelineState) -> PipelineState:
     report key ``planarize``)."""
     from .mesh import vertex_faces
     from .quad import planarize, settle_off_surface, subdivide_to_quads
-    from .smooth import SURFACE, _face_rings, smooth, untangle
+    from .smooth import SURFACE, _face_rings, mesh_figures, smooth, untangle
 
     _need(state, "quad")
     o = state.options
     q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
     warp_term = None
     if o.final_iterations:
+        # the first pass's figures after it are taken only if no second pass follows
         q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size,
-                        ortho_weight=o.final_ortho_weight)
+                        ortho_weight=o.final_ortho_weight, figures="before")
         # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
         # where the warp p99 acceptance is missed
         wq = warp(q.points, q.faces)
@@ -450,7 +451,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
             movable = movable[movable >= 0]
             q, res2 = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy,
                              target_edge=state.size, ortho_weight=o.final_ortho_weight,
-                             warp_weight=o.final_warp_weight, warp_from=o.warp_from, vertices=movable)
+                             warp_weight=o.final_warp_weight, warp_from=o.warp_from, vertices=movable,
+                             figures="after")
             res = dataclasses.replace(
                 res2, quality_before=res.quality_before, moves=res.moves + res2.moves,
                 max_move=max(res.max_move, res2.max_move),
@@ -458,6 +460,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
                     "iterations", "seconds", "factorisations", "n_step_halvings", "n_rejected", "n_fold_hits",
                     "n_jump_hits")})
             warp_term.update(applied=True, warp_p99_after=_warp_p99(q), vertices=int(len(movable)))
+        else:
+            res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, state.size))
     # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
     # been smoothed most of them can go onto it (the same settle, no element below the guard
     # made worse)

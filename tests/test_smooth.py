@@ -570,3 +570,22 @@ def test_smooth_vertices_moves_only_those_and_keeps_them_on_the_surface():
     assert (scaled_jacobian(part.points, part.faces) >= np.minimum(sj0, 0.3) - 1e-12).all()
     with pytest.raises(ValueError, match="vertices must be ids"):
         smooth(mesh, sup, vertices=[mesh.n_points])
+
+
+def test_smooth_fills_the_figures_asked_for():
+    """``figures`` selects which quality summaries are computed; the mesh does not depend on it."""
+    from shellmesh_mdao.smooth import mesh_figures
+
+    m, loc, planes, curves = t_mesh()
+    sup = derive_supports(m, loc, planes, curves, sliding=True)
+    out, res = smooth(m, sup, iterations=3, figures="both")
+    assert res.quality_before == mesh_figures(m, sup) and res.quality_after == mesh_figures(out, sup)
+    assert res.quality_before != res.quality_after
+    for which in ("before", "after", "none"):
+        o2, r2 = smooth(m, sup, iterations=3, figures=which)
+        assert np.array_equal(o2.points, out.points)
+        assert (r2.quality_before == res.quality_before) == (which == "before")
+        assert (r2.quality_after == res.quality_after) == (which == "after")
+        assert r2.quality_before == {} or which == "before"
+    with pytest.raises(ValueError):
+        smooth(m, sup, figures="all")
