@@ -55,7 +55,7 @@ DEFAULT_MIN_EDGE_FRACTION = 0.1
 
 _HI = 4.0 / 3.0          # split edges longer than _HI * local size
 _LO = 4.0 / 5.0          # collapse edges shorter than _LO * local size
-_REGULAR, _CHAIN, _CORNER = 0, 1, 2
+_REGULAR, _CHAIN, _CORNER = 0, 1, 2   # the compiled facing tests (kernels.facing_ok & co.) take kind 0 as regular
 
 
 # ============================================================================ small kernels
