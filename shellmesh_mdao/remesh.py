@@ -94,16 +94,21 @@ def _tri_min_angle(A, B, C):
 def _min_angle_of(sc):
     """Smallest angle (degrees) of triangles from the (4, k) :func:`~.kernels.corner_sin_cos`
     arguments of their first two corners."""
-    a0 = np.arctan2(sc[0], sc[1])
-    a1 = np.arctan2(sc[2], sc[3])
+    a0, a1 = _arctan2_rows(sc)
     return np.degrees(np.minimum(np.minimum(a0, a1), np.pi - a0 - a1))
+
+
+def _arctan2_rows(sc):
+    """``arctan2(sc[0], sc[1])`` and ``arctan2(sc[2], sc[3])`` on fresh arrays, as the numpy
+    code before the kernels computed them: on rows of one buffer numpy's AVX-512 loop was seen
+    to fall back on its scalar arctan2 (other last bits) in some processes and not others."""
+    return (np.arctan2(sc[0].copy(), sc[1].copy()), np.arctan2(sc[2].copy(), sc[3].copy()))
 
 
 def _tri_angles(P, F):
     """(m, 3) interior angles in degrees."""
-    sc = corner_sin_cos(P[F[:, 0]], P[F[:, 1]], P[F[:, 2]])
-    a0 = np.degrees(np.arctan2(sc[0], sc[1]))
-    a1 = np.degrees(np.arctan2(sc[2], sc[3]))
+    a0, a1 = _arctan2_rows(corner_sin_cos(P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]))
+    a0, a1 = np.degrees(a0), np.degrees(a1)
     return np.stack([a0, a1, 180.0 - a0 - a1], 1)
 
 
