@@ -31,7 +31,7 @@ from . import kernels as _k
 from .errors import MeshValidationError
 
 __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces",
-           "cross_rows", "norm_rows"]
+           "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows"]
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -64,6 +64,29 @@ def norm_rows(a, axis: int = -1, keepdims: bool = False) -> np.ndarray:
         out = np.sqrt(x * x + y * y + z * z)
         return out[..., None] if keepdims else out
     return np.linalg.norm(a, axis=axis, keepdims=keepdims)
+
+
+def dot_rows(a, b) -> np.ndarray:
+    """``np.einsum("ij,ij->i", a, b)``, the same bits; (k, 3) float64 rows through a compiled
+    loop (:func:`~shellmesh_mdao.kernels.dot_rows`), anything else through numpy."""
+    out = _k.dot_rows(a, b)
+    return np.einsum("ij,ij->i", a, b) if out is None else out
+
+
+def dot_norm_rows(a) -> np.ndarray:
+    """``np.sqrt(np.einsum("ij,ij->i", a, a))``, the same bits (compiled for (k, 3) rows)."""
+    out = _k.dot_norm_rows(a)
+    return np.sqrt(np.einsum("ij,ij->i", a, a)) if out is None else out
+
+
+def dot_unit_rows(a) -> np.ndarray:
+    """Rows of ``a`` over :func:`dot_norm_rows`, zero rows where that is not positive, the same
+    bits as ``np.divide(a, n, out=zeros, where=n > 0)`` (compiled for (k, 3) rows)."""
+    out = _k.dot_unit_rows(a)
+    if out is None:
+        n = dot_norm_rows(a)[:, None]
+        out = np.divide(a, n, out=np.zeros_like(a), where=n > 0)
+    return out
 
 
 def _as_faces(faces) -> np.ndarray:

@@ -38,10 +38,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, dot_norm_rows, dot_rows, dot_unit_rows,
-                      edge_table, facing_ok, flip_tests, greedy_independent, greedy_independent_rings, stable_order,
-                      triangle_normals)
-from .mesh import ShellMesh, cross_rows
+from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, edge_table, facing_ok, flip_tests,
+                      greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
+from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
 __all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION",
@@ -59,24 +58,8 @@ _REGULAR, _CHAIN, _CORNER = 0, 1, 2   # the compiled facing tests (kernels.facin
 
 
 # ============================================================================ small kernels
-# (k, 3) float64 rows go to compiled loops with numpy's arithmetic (kernels.dot_rows & co.);
-# anything else to numpy
-def _norm(a):
-    out = dot_norm_rows(a)
-    return np.sqrt(np.einsum("ij,ij->i", a, a)) if out is None else out
-
-
-def _unit(a):
-    out = dot_unit_rows(a)
-    if out is None:
-        n = _norm(a)
-        out = np.divide(a, n[:, None], out=np.zeros_like(a), where=n[:, None] > 0)
-    return out
-
-
-def _dot(a, b):
-    out = dot_rows(a, b)
-    return np.einsum("ij,ij->i", a, b) if out is None else out
+# einsum's dot, its norm and unit rows (mesh.dot_rows & co.: compiled for (k, 3) rows)
+_dot, _norm, _unit = dot_rows, dot_norm_rows, dot_unit_rows
 
 
 def _tri_normals(P, F):

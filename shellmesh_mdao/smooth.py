@@ -63,9 +63,8 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import (closest_on_curves, dot_norm_rows, dot_rows, dot_unit_rows, min_corner_sj, ortho_gradient,
-                      ortho_jacobian)
-from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
+from .kernels import closest_on_curves, min_corner_sj, ortho_gradient, ortho_jacobian
+from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
 
@@ -87,23 +86,8 @@ _TRI_SJ = 2.0 / math.sqrt(3.0)
 
 
 # ============================================================================ small kernels
-# (k, 3) float64 rows go to compiled loops with numpy's arithmetic (kernels.dot_rows & co.)
-def _dot(a, b):
-    out = dot_rows(a, b)
-    return np.einsum("ij,ij->i", a, b) if out is None else out
-
-
-def _norm(a):
-    out = dot_norm_rows(a)
-    return np.sqrt(np.einsum("ij,ij->i", a, a)) if out is None else out
-
-
-def _unit(a):
-    out = dot_unit_rows(a)
-    if out is None:
-        n = _norm(a)[:, None]
-        out = np.divide(a, n, out=np.zeros_like(a), where=n > 0)
-    return out
+# einsum's dot, its norm and unit rows (mesh.dot_rows & co.: compiled for (k, 3) rows)
+_dot, _norm, _unit = dot_rows, dot_norm_rows, dot_unit_rows
 
 
 def _onb(n: np.ndarray):
