@@ -20,7 +20,6 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
-
 from conftest import GEOMETRY, REPO
 
 _PROBE = r"""
