@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -901,6 +902,38 @@ def _face_rings(faces, ptr, vf, verts, rings: int = 2):
     return region
 
 
+def _nearest_other(P, verts):
+    """Distance from each of ``verts`` to the nearest other vertex of ``P`` (one thread: it runs
+    beside the smoothing's own work, see :class:`_Background`)."""
+    dn, _ = cKDTree(P, balanced_tree=False, compact_nodes=False).query(P[verts], k=2, workers=1)
+    return dn[:, 1]
+
+
+class _Background:
+    """``fn(*args)`` in a thread of its own from now on; :meth:`result` waits for its value (or
+    raises its exception). For work that releases the GIL (a KD-tree query) beside numpy and
+    SuperLU work in the caller's thread; the value is the same as a call in the caller's."""
+
+    def __init__(self, fn, *args):
+        self._out: list = []
+
+        def run():
+            try:
+                self._out.append((True, fn(*args)))
+            except BaseException as exc:          # handed to the caller by result()
+                self._out.append((False, exc))
+
+        self._thread = threading.Thread(target=run, daemon=True)
+        self._thread.start()
+
+    def result(self):
+        self._thread.join()
+        ok, value = self._out[0]
+        if not ok:
+            raise value
+        return value
+
+
 class _Linear:
     """Solver of the reduced system H u = b: sparse LU (factorised once, reused for every
     right-hand side) or Jacobi-preconditioned conjugate gradients on the same matrix."""
@@ -1204,6 +1237,10 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         if not len(movable):
             it = 0
             break
+        # trust region: distance to the nearest other vertex, asked of a KD-tree in a second
+        # thread while this one refreshes and solves (it depends on P alone; a distance does
+        # not depend on the tree's layout nor on the threads answering: the cheapest build)
+        near = _Background(_nearest_other, P, movable)
         if (it - 1) % refresh == 0:
             vn, kap = _vertex_normals_and_curvature(P, faces, is_tri, n)
             T, owner, nrm, tv = _frames(mesh, P, supports, vn)
@@ -1261,10 +1298,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
             D = _solve_kkt(K3, rho_v, n, g, supports, T, owner)
         else:
             D = (T @ lin.solve(-(T.T @ g))).reshape(n, 3)
-        # trust region: distance to the nearest other vertex (a distance does not depend on
-        # the tree's layout nor on the threads answering: the cheapest build, every core)
-        dn, _ = cKDTree(P, balanced_tree=False, compact_nodes=False).query(P[movable], k=2, workers=-1)
-        r = trust * dn[:, 1]
+        r = trust * near.result()
         Dm = D[movable]
         L = _norm(Dm)
         Dm *= np.minimum(1.0, np.divide(r, L, out=np.ones_like(L), where=L > 0))[:, None]

@@ -589,3 +589,23 @@ def test_smooth_fills_the_figures_asked_for():
         assert r2.quality_before == {} or which == "before"
     with pytest.raises(ValueError):
         smooth(m, sup, figures="all")
+
+
+def test_trust_radius_query_in_its_own_thread():
+    """The smoothing asks its trust radius (distance to the nearest other vertex) of a KD-tree in a
+    second thread: the distances are a brute-force scan's, coincident points give 0, and an
+    exception in the thread reaches the caller."""
+    from shellmesh_mdao.smooth import _Background, _nearest_other
+
+    rng = np.random.default_rng(5)
+    P = rng.normal(size=(400, 3))
+    P[7] = P[3]                                            # a coincident pair
+    verts = np.arange(0, 400, 3)
+    d = np.linalg.norm(P[verts, None, :] - P[None, :, :], axis=2)
+    d[np.arange(len(verts)), verts] = np.inf
+    job = _Background(_nearest_other, P, verts)
+    got = job.result()
+    assert np.allclose(got, d.min(1), rtol=0, atol=1e-12) and got[1] == 0.0
+    assert job.result() is got                             # asked twice, one value
+    with pytest.raises(IndexError):
+        _Background(_nearest_other, P, np.array([400])).result()
