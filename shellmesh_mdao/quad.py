@@ -325,16 +325,17 @@ def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6
 _TWIST = np.array([1.0, -1.0, 1.0, -1.0])
 
 
-def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50):
+def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50, start=None):
     """``t`` minimising ``|A t - b|^2 + sum(reg t^2)`` with ``|t| <= bound``: the primal-dual
     active-set method for box-constrained QPs (Hintermueller, Ito and Kunisch, SIAM J. Optim.
     13, 2003), one sparse LU solve of the free unknowns per round, until the active sets repeat
-    (at most ``max_rounds`` rounds; the result is clipped to the box either way)."""
+    (at most ``max_rounds`` rounds; the result is clipped to the box either way). ``start``:
+    ``(x, lam)`` of a neighbouring problem, whose active sets are the first guess (default
+    zeros: every unknown free). Returns ``(t, lam)``, ``lam`` the bounds' multipliers."""
     N = (A.T @ A + sparse.diags(reg)).tocsr()
     r = A.T @ b
     c = N.diagonal()
-    x = np.zeros(A.shape[1])
-    lam = np.zeros_like(x)
+    x, lam = (np.zeros(A.shape[1]), np.zeros(A.shape[1])) if start is None else (start[0].copy(), start[1].copy())
     sets = None
     for _ in range(max_rounds):
         up = lam + c * (x - bound) > 0
@@ -350,7 +351,7 @@ def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50):
             x[fi] = spla.spsolve(Nf[:, fi].tocsc(), r[fi] - Nf[:, ~free] @ x[~free])
         lam = r - N @ x
         lam[free] = 0.0
-    return np.clip(x, -bound, bound)
+    return np.clip(x, -bound, bound), lam
 
 
 def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_above: float = 10.0,
@@ -450,6 +451,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     nu = mesh.vertex_normals()[cand]
     D = 0.5 * (norm_rows(P[Q[:, 2]] - P[Q[:, 0]], axis=1) + norm_rows(P[Q[:, 3]] - P[Q[:, 1]], axis=1))
     t = np.zeros(len(cand))
+    start = None
     for _ in range(int(iterations)):
         X = P.copy()
         X[cand] += t[:, None] * nu
@@ -466,7 +468,8 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
             # the quads already flatter than aim only hold on, the moves go where warp is
             wc = element_quality(X, Q)["warp"]
             b = b + (A @ t - b) * np.minimum(1.0, aim / np.maximum(wc, 1e-12))
-        t = _bounded_least_squares(A, b, regularisation / h ** 2, bound)
+        t, lam = _bounded_least_squares(A, b, regularisation / h ** 2, bound, start=start)
+        start = (t, lam)             # the next round's problem is this one re-linearised
     t[np.abs(t) <= 1e-9 * bound] = 0.0            # round-off of the solve: those nodes stay on the input
     # guard: no element at or below guard_jacobian worse, none above falls to it, none turns over
     faces_at = _face_rings(F, vptr, vface, cand, 1)

@@ -305,3 +305,33 @@ def test_planarize_keeps_what_it_cannot_improve():
     out, info = planarize(mesh, sup, max_offset=0.05 * 0.35)
     assert info["quads_above_before"] == int((element_quality(mesh.points, mesh.faces)["warp"] > 10).sum()) == 60
     assert out is mesh and not info["applied"] and info["quads_above_after"] == 60
+
+
+def test_bounded_least_squares_against_lsq_linear_cold_and_warm():
+    """planarize's box-constrained least squares (primal-dual active set) gives scipy's
+    lsq_linear answer; started from a neighbouring problem's solution and multipliers, as
+    planarize starts each re-linearised round, it gives the same bits as from zero."""
+    from scipy import sparse
+    from scipy.optimize import lsq_linear
+
+    from shellmesh_mdao.quad import _bounded_least_squares
+
+    rng = np.random.default_rng(3)
+    m, n = 300, 200
+    A = sparse.random(m, n, density=0.03, random_state=rng, format="csr") + sparse.eye(m, n, format="csr")
+    reg = np.full(n, 1e-3)
+    bound = rng.uniform(0.05, 0.2, n)
+    b = rng.normal(size=m)
+    t, lam = _bounded_least_squares(A, b, reg, bound)
+    Ar = sparse.vstack([A, sparse.diags(np.sqrt(reg))]).tocsr()
+    ref = lsq_linear(Ar.toarray(), np.concatenate([b, np.zeros(n)]), bounds=(-bound, bound), tol=1e-12,
+                     method="bvls")                     # bvls takes a dense matrix
+    assert np.abs(t - ref.x).max() < 1e-8
+    at = np.isclose(np.abs(t), bound)
+    assert 10 < at.sum() < n - 10                          # both sets in play
+    assert (lam[~at] == 0).all() and (np.sign(lam[at]) == np.sign(t[at])).all()
+    b2 = b + 0.05 * rng.normal(size=m)                     # the neighbouring problem
+    cold, _ = _bounded_least_squares(A, b2, reg, bound)
+    warm, _ = _bounded_least_squares(A, b2, reg, bound, start=(t, lam))
+    assert cold.tobytes() == warm.tobytes()
+    assert not np.array_equal(cold, t)
