@@ -88,9 +88,11 @@ class PipelineOptions:
                           ``warp_from`` degrees slide along the input facets until the quad is
                           flatter) in a second smoothing pass after subdivision, run only while more
                           than 1 % of the quads are warped more than ``warp_goal`` degrees after the
-                          first (the warp p99 acceptance; ``warp_goal`` 0: always), and moving only the
-                          nodes within two rings of the quads warped more than ``warp_from``. Default
-                          300; 0 drops the pass.
+                          first (the warp p99 acceptance; ``warp_goal`` 0: always) and the
+                          ``planar_offset`` move alone does not bring them to it (tried first on the
+                          first pass's mesh: cheaper, and it keeps the scaled Jacobians; on the corpus
+                          only straight_wing needs the pass), moving only the nodes within two rings of
+                          the quads warped more than ``warp_from``. Default 300; 0 drops the pass.
     ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 300 (bwb's
                           warp p99 10.5 -> 9.7 degrees); 0 drops it.
     ``smooth_warp_spread`` the term before subdivision leaves out the quads that share a vertex with
@@ -424,25 +426,39 @@ def stage_quad(state: PipelineState) -> PipelineState:
     rings around them; report key ``poor_repair``), and what remains is reported and logged. Last,
     the free skin nodes around the quads still warped above ``warp_goal`` move along their normals,
     off the input by at most ``planar_offset`` times the size (:func:`~shellmesh_mdao.quad.planarize`;
-    report key ``planarize``)."""
+    report key ``planarize``). Where the warp p99 is above ``warp_goal`` after the final smoothing
+    and that last move alone does not bring it to the goal, a second smoothing pass with the quad
+    planarity term runs first, around the warped quads (``final_warp_weight``; report key
+    ``final_smooth.warp_term``)."""
     from .mesh import vertex_faces
-    from .quad import planarize, settle_off_surface, subdivide_to_quads
-    from .smooth import SURFACE, _face_rings, mesh_figures, smooth, untangle
+    from .quad import subdivide_to_quads
+    from .smooth import _face_rings, mesh_figures, smooth
 
     _need(state, "quad")
     o = state.options
     q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
     warp_term = None
+    done = None
     if o.final_iterations:
         # the first pass's figures after it are taken only if no second pass follows
         q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size,
                         ortho_weight=o.final_ortho_weight, figures="before")
         # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
-        # where the warp p99 acceptance is missed
+        # where the warp p99 acceptance is missed and the planarize move alone cannot meet it
         wq = warp(q.points, q.faces)
         p99 = _warp_p99(q, wq)
         warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
         if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal):
+            if o.planar_offset > 0 and o.warp_goal > 0:
+                # first the cheap way: the planarize move (and the settle and repair before it)
+                # on this pass's mesh; kept if it meets the goal, else the second pass runs on
+                # this pass's mesh as if it had not been tried
+                trial = _finish_quads(state, q, sup)
+                alone = trial["planar"]["warp_p99_after"]
+                warp_term["planarize_alone_p99"] = alone
+                if alone <= o.warp_goal:
+                    done = trial
+        if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal) and done is None:
             # only around the warped quads (two rings): the rest of the mesh keeps the first pass
             vptr, vface = vertex_faces(q.faces, q.n_points)
             warped = np.unique(q.faces[wq > o.warp_from])
@@ -462,6 +478,41 @@ def stage_quad(state: PipelineState) -> PipelineState:
             warp_term.update(applied=True, warp_p99_after=_warp_p99(q), vertices=int(len(movable)))
         else:
             res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, state.size))
+    if done is None:
+        done = _finish_quads(state, q, sup)
+    q, sj, poor = done["mesh"], done["sj"], done["poor"]
+    if done["warning"]:
+        log.warning(done["warning"])
+    st = state.but(mesh=q, supports=sup, stage="quad")
+    if o.final_iterations:
+        st.report["final_smooth"] = _smooth_report(res)
+        st.report["final_smooth"]["warp_term"] = warp_term
+    if done["repair"] is not None:
+        st.report["poor_repair"] = done["repair"]
+    st.report["off_surface"] = done["off_surface"]
+    st.report["planarize"] = done["planar"]
+    st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),
+                                  "folded": int((sj <= 0).sum()), "elements": poor[:100].tolist(),
+                                  "min_scaled_jacobian": float(sj.min()) if len(sj) else None}
+    if len(poor):
+        where = sorted({q.component_names[c] for c in q.component[poor]})
+        log.warning("%d element(s) with scaled Jacobian <= %.1f (min %.3f) in %s: they come from sliver triangles "
+                    "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
+                    len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
+    return st
+
+
+def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
+    """The quad stage after its smoothing, on ``q``: skin nodes left off the surface settled,
+    elements at or below :data:`POOR_JACOBIAN` repaired, the nodes still off the surface
+    reported, then :func:`~shellmesh_mdao.quad.planarize`. Returns ``{"mesh", "sj", "poor",
+    "repair", "off_surface", "planar", "warning"}`` (the warning about the nodes off the surface,
+    or None: the caller logs it for the result it keeps); ``q`` and ``sup`` are not changed."""
+    from .mesh import vertex_faces
+    from .quad import planarize, settle_off_surface
+    from .smooth import SURFACE, _face_rings, untangle
+
+    o = state.options
     # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
     # been smoothed most of them can go onto it (the same settle, no element below the guard
     # made worse)
@@ -493,12 +544,13 @@ def stage_quad(state: PipelineState) -> PipelineState:
                    "before_settle": settled["before"], "settled": settled["before"] - settled["after"],
                    "max_distance_over_size": float(d.max(initial=0.0) / state.size),
                    "nodes": skin_nodes[off][:100].tolist()}
+    warning = None
     if off.any():
         k = skin_nodes[off][np.argmax(d[off])]
-        log.warning("%d skin node(s) off the input surface, up to %.3g (%.2f element sizes) near %s: a face "
-                    "spanned a crease or ridge much tighter than the element size there; use a smaller --size "
-                    "or see the report's 'off_surface' (0-based ids)", int(off.sum()), float(d[off].max()),
-                    float(d[off].max() / state.size), np.array2string(q.points[k], precision=4))
+        warning = (f"{int(off.sum())} skin node(s) off the input surface, up to {float(d[off].max()):.3g} "
+                   f"({float(d[off].max() / state.size):.2f} element sizes) near "
+                   f"{np.array2string(q.points[k], precision=4)}: a face spanned a crease or ridge much tighter "
+                   "than the element size there; use a smaller --size or see the report's 'off_surface' (0-based ids)")
     # quads still warped above the goal straddle kinks of the faceted input that no move along it
     # can flatten: their free skin nodes leave the facets by at most planar_offset * size
     planar = None
@@ -509,23 +561,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
         if planar["applied"]:
             sj = scaled_jacobian(q.points, q.faces)
             poor = np.flatnonzero(sj <= POOR_JACOBIAN)
-    st = state.but(mesh=q, supports=sup, stage="quad")
-    if o.final_iterations:
-        st.report["final_smooth"] = _smooth_report(res)
-        st.report["final_smooth"]["warp_term"] = warp_term
-    if repair is not None:
-        st.report["poor_repair"] = repair
-    st.report["off_surface"] = off_surface
-    st.report["planarize"] = planar
-    st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),
-                                  "folded": int((sj <= 0).sum()), "elements": poor[:100].tolist(),
-                                  "min_scaled_jacobian": float(sj.min()) if len(sj) else None}
-    if len(poor):
-        where = sorted({q.component_names[c] for c in q.component[poor]})
-        log.warning("%d element(s) with scaled Jacobian <= %.1f (min %.3f) in %s: they come from sliver triangles "
-                    "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
-                    len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
-    return st
+    return {"mesh": q, "sj": sj, "poor": poor, "repair": repair, "off_surface": off_surface, "planar": planar,
+            "warning": warning}
 
 
 def _smooth_report(res) -> dict:

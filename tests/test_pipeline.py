@@ -187,23 +187,27 @@ def test_snap_option_keeps_the_edges_beside_chains_long():
 
 def test_final_ortho_weight_option_lifts_the_quads():
     """Solver option final_ortho_weight (default 3) is the orthogonality weight of the smoothing
-    after subdivision: against weight 1 (smooth()'s default) both the mean and the worst scaled
-    Jacobian of the final mesh are higher (on this wing 0.9463 / 0.416 against 0.9441 / 0.395)."""
+    after subdivision: against weight 1 (smooth()'s default) the mean scaled Jacobian of the
+    smoothed mesh is higher (on this wing, with the warp moves after the smoothing off so that the
+    smoothing alone is compared: 0.9463 against 0.9442; its worst element is not better, 0.317
+    against 0.336)."""
     assert pl.PipelineOptions().final_ortho_weight == 3.0
-    base = run_small((0.15, 0.65)).mesh
+    only = {"planar_offset": 0.0, "final_warp_weight": 0.0}
+    base = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, options=only).mesh
     one = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False,
-                          options={"final_ortho_weight": 1.0}).mesh
+                          options=dict(only, final_ortho_weight=1.0)).mesh
     assert np.array_equal(base.faces, one.faces)           # the option only moves nodes
     a = element_quality(base.points, base.faces)["scaled_jacobian"]
     b = element_quality(one.points, one.faces)["scaled_jacobian"]
-    assert a.mean() > b.mean() and a.min() > b.min()
+    assert a.mean() > b.mean() + 0.001
 
 
 def test_warp_options_flatten_the_quads():
     """Solver options final_warp_weight (default 300), smooth_warp_weight (default 300),
     smooth_warp_spread (75 deg), warp_from (7 deg) and warp_goal (10 deg): after the final
     smoothing a second pass with the quad planarity term runs only while the warp p99 is above
-    warp_goal, and moves only the nodes within two rings of the quads warped above warp_from (on
+    warp_goal (and, with planar_offset > 0, the planarize move alone does not meet it; off here),
+    and moves only the nodes within two rings of the quads warped above warp_from (on
     this wing 11.8 -> 8.2 deg, 881 of 3,125 nodes); a goal the mesh already meets leaves the
     mesh exactly as without the term; smooth_warp_weight puts the term in the smoothing before
     subdivision (pre-subdivision warp p99 13.9 -> 7.3 deg at 300)."""
@@ -250,15 +254,25 @@ def run_flat_off():
     return _CACHE["planar_off"]
 
 
+def run_pass_one_only():
+    if "pass_one" not in _CACHE:
+        _CACHE["pass_one"] = pl.run_pipeline(small_wing(), small_layout((0.15, 0.65)), SIZE, progress=False,
+                                             options={"planar_offset": 0.0, "final_warp_weight": 0.0})
+    return _CACHE["pass_one"]
+
+
 def test_planarize_moves_free_skin_nodes_off_the_input_within_the_bound():
     """Solver option planar_offset (default 0.05 of the size): after the final smoothing, the
     free skin nodes around the quads still warped above warp_goal move along their normals, off
     the input by at most 0.05 * size, to flatten quads that straddle kinks of the faceted input.
-    Against the same run with planar_offset 0: the same faces; only SURFACE nodes moved (chain,
-    junction, feature and member nodes where they were), each by at most the bound; fewer quads
-    above 10 degrees, as reported; the off-surface report (measured before) the same."""
+    On this wing that move alone meets warp_goal, so the second smoothing pass does not run.
+    Against the same run with planar_offset 0 and no second pass: the same faces; only SURFACE
+    nodes moved (chain, junction, feature and member nodes where they were), each by at most the
+    bound; fewer quads above 10 degrees, as reported; the off-surface report (measured before)
+    the same."""
     assert pl.PipelineOptions().planar_offset == 0.05
-    res, flat = run_small((0.15, 0.65)), run_flat_off()
+    res, flat = run_small((0.15, 0.65)), run_pass_one_only()
+    assert not res.report["final_smooth"]["warp_term"]["applied"]
     q, q0, sup = res.mesh, flat.mesh, res.state.supports
     rep = res.report["planarize"]
     assert flat.report["planarize"] is None
@@ -278,6 +292,36 @@ def test_planarize_moves_free_skin_nodes_off_the_input_within_the_bound():
     assert sj.min() >= min(sj0.min(), 0.3)                     # no element falls to 0.3 or below
     with pytest.raises(ShellMeshError, match="planar_offset"):
         pl.PipelineOptions.from_dict({"planar_offset": 0.3})
+
+
+def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal():
+    """The second final smoothing pass (the quad planarity term) costs as much as the first; the
+    planarize move is cheap and, where it meets warp_goal alone, keeps the better scaled
+    Jacobians. So the quad stage tries it first on the first pass's mesh and keeps it when the
+    warp p99 is then at or below the goal (the default on this wing: 11.8 -> 8.5 deg, mean SJ
+    0.946 against 0.944 with the pass); otherwise (warp_goal 5: 6.6 deg alone) it runs the pass
+    on the first pass's mesh, as if the move had not been tried, then the move (5.6 deg). The
+    settle / repair / planarize tail changes neither the mesh nor the supports it is given."""
+    res = run_small((0.15, 0.65))
+    wt, rep = res.report["final_smooth"]["warp_term"], res.report["planarize"]
+    assert wt["warp_p99_before"] > 10.0 and not wt["applied"]
+    assert wt["planarize_alone_p99"] == rep["warp_p99_after"] <= 10.0 < rep["warp_p99_before"]
+    quads = res.mesh.faces[:, 3] >= 0
+    w = element_quality(res.mesh.points, res.mesh.faces)["warp"][quads]
+    assert np.percentile(w, 99) == pytest.approx(wt["planarize_alone_p99"])
+    strict = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, options={"warp_goal": 5.0})
+    ws = strict.report["final_smooth"]["warp_term"]
+    assert ws["applied"] and ws["planarize_alone_p99"] > 5.0 and ws["vertices"] > 0
+    final = np.percentile(element_quality(strict.mesh.points, strict.mesh.faces)["warp"][quads], 99)
+    assert final == pytest.approx(strict.report["planarize"]["warp_p99_after"]) and final < ws["planarize_alone_p99"]
+    check_guarantees(strict)
+    # the tail is pure: twice on the same input, the same output, the input untouched
+    st = res.state
+    q, sup = st.mesh, st.supports
+    keep = (q.points.copy(), sup.kind.copy(), sup.ref.copy())
+    a, b = pl._finish_quads(st, q, sup), pl._finish_quads(st, q, sup)
+    assert a["mesh"].points.tobytes() == b["mesh"].points.tobytes() and a["planar"] == b["planar"]
+    assert np.array_equal(q.points, keep[0]) and np.array_equal(sup.kind, keep[1]) and np.array_equal(sup.ref, keep[2])
 
 
 def test_stage_outputs_are_not_mutated():
