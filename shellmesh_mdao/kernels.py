@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "min_corner_sj", "closest_on_curves", "closest_on_triangles", "stable_order",
+           "ortho_gradient", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "stable_order",
            "stable_pair_order", "edge_table", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -436,6 +436,49 @@ def _nanmin(x, y):
     return x if x < y else y
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _element_frame(C, k, E, cr, L, nn):
+    """The corners ``C[:k]`` of one element: its own unit normal into ``nn``
+    (smooth._corner_normals, smooth._unit), its edges ``E``, the corners' cross products
+    ``cr`` and the edge lengths ``L`` (norm_rows' order)."""
+    if k == 4:
+        u0, u1, u2 = C[2, 0] - C[0, 0], C[2, 1] - C[0, 1], C[2, 2] - C[0, 2]
+        w0, w1, w2 = C[3, 0] - C[1, 0], C[3, 1] - C[1, 1], C[3, 2] - C[1, 2]
+    else:
+        u0, u1, u2 = C[1, 0] - C[0, 0], C[1, 1] - C[0, 1], C[1, 2] - C[0, 2]
+        w0, w1, w2 = C[2, 0] - C[0, 0], C[2, 1] - C[0, 1], C[2, 2] - C[0, 2]
+    v0, v1, v2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+    ln = np.sqrt((v0 * v0 + v2 * v2) + v1 * v1)          # einsum's order
+    if ln > 0:
+        nn[0], nn[1], nn[2] = v0 / ln, v1 / ln, v2 / ln
+    else:
+        nn[0], nn[1], nn[2] = 0.0, 0.0, 0.0
+    for i in range(k):
+        j = i + 1 if i + 1 < k else 0
+        for d in range(3):
+            E[i, d] = C[j, d] - C[i, d]
+    for i in range(k):
+        h = i - 1 if i > 0 else k - 1
+        cr[i, 0] = E[h, 1] * E[i, 2] - E[h, 2] * E[i, 1]
+        cr[i, 1] = E[h, 2] * E[i, 0] - E[h, 0] * E[i, 2]
+        cr[i, 2] = E[h, 0] * E[i, 1] - E[h, 1] * E[i, 0]
+        L[i] = np.sqrt((E[i, 0] * E[i, 0] + E[i, 1] * E[i, 1]) + E[i, 2] * E[i, 2])   # norm_rows' order
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _element_min_sj(k, cr, L, n0, n1, n2):
+    """The smallest corner scaled Jacobian of one element (its :func:`_element_frame`) against
+    the normal ``(n0, n1, n2)``, before the triangles' scale."""
+    lo = np.inf
+    for i in range(k):
+        h = i - 1 if i > 0 else k - 1
+        den = L[i] * L[h]
+        sc = (cr[i, 0] * n0 + cr[i, 2] * n2) + cr[i, 1] * n1
+        q = sc / den if den > 0 else 0.0
+        lo = q if i == 0 else _nanmin(lo, q)
+    return lo
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _min_corner_sj(P, faces, is_tri, nref, use_ref, tri_scale):
     m = faces.shape[0]
@@ -450,44 +493,47 @@ def _min_corner_sj(P, faces, is_tri, nref, use_ref, tri_scale):
         for i in range(k):
             for d in range(3):
                 C[i, d] = P[faces[f, i], d]
-        # own unit normal (smooth._corner_normals, smooth._unit)
-        if k == 4:
-            u0, u1, u2 = C[2, 0] - C[0, 0], C[2, 1] - C[0, 1], C[2, 2] - C[0, 2]
-            w0, w1, w2 = C[3, 0] - C[1, 0], C[3, 1] - C[1, 1], C[3, 2] - C[1, 2]
-        else:
-            u0, u1, u2 = C[1, 0] - C[0, 0], C[1, 1] - C[0, 1], C[1, 2] - C[0, 2]
-            w0, w1, w2 = C[2, 0] - C[0, 0], C[2, 1] - C[0, 1], C[2, 2] - C[0, 2]
-        v0, v1, v2 = u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
-        ln = np.sqrt((v0 * v0 + v2 * v2) + v1 * v1)          # einsum's order
-        if ln > 0:
-            nn[0], nn[1], nn[2] = v0 / ln, v1 / ln, v2 / ln
-        else:
-            nn[0], nn[1], nn[2] = 0.0, 0.0, 0.0
-        for i in range(k):
-            j = i + 1 if i + 1 < k else 0
-            for d in range(3):
-                E[i, d] = C[j, d] - C[i, d]
-        for i in range(k):
-            h = i - 1 if i > 0 else k - 1
-            cr[i, 0] = E[h, 1] * E[i, 2] - E[h, 2] * E[i, 1]
-            cr[i, 1] = E[h, 2] * E[i, 0] - E[h, 0] * E[i, 2]
-            cr[i, 2] = E[h, 0] * E[i, 1] - E[h, 1] * E[i, 0]
-            L[i] = np.sqrt((E[i, 0] * E[i, 0] + E[i, 1] * E[i, 1]) + E[i, 2] * E[i, 2])   # norm_rows' order
+        _element_frame(C, k, E, cr, L, nn)
         scale = tri_scale if k == 3 else 1.0
-        best = np.inf
-        for pass_ in range(2 if use_ref else 1):
-            if pass_ == 1:
-                nn[0], nn[1], nn[2] = nref[f, 0], nref[f, 1], nref[f, 2]
-            lo = np.inf
-            for i in range(k):
-                h = i - 1 if i > 0 else k - 1
-                den = L[i] * L[h]
-                sc = (cr[i, 0] * nn[0] + cr[i, 2] * nn[2]) + cr[i, 1] * nn[1]
-                q = sc / den if den > 0 else 0.0
-                lo = q if i == 0 else _nanmin(lo, q)
-            best = _nanmin(best, lo * scale)
+        best = _nanmin(np.inf, _element_min_sj(k, cr, L, nn[0], nn[1], nn[2]) * scale)
+        if use_ref:
+            best = _nanmin(best, _element_min_sj(k, cr, L, nref[f, 0], nref[f, 1], nref[f, 2]) * scale)
         out[f] = best
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _face_quality(C, is_tri, nref, tri_scale):
+    m = C.shape[0]
+    out = np.empty(m)
+    E = np.empty((4, 3))
+    cr = np.empty((4, 3))
+    L = np.empty(4)
+    nn = np.empty(3)
+    for f in range(m):
+        k = 3 if is_tri[f] else 4
+        _element_frame(C[f], k, E, cr, L, nn)
+        scale = tri_scale if k == 3 else 1.0
+        sj = _nanmin(np.inf, _element_min_sj(k, cr, L, nn[0], nn[1], nn[2]) * scale)
+        d = (nn[0] * nref[f, 0] + nn[2] * nref[f, 2]) + nn[1] * nref[f, 1] + 0.0   # einsum's dot
+        out[f] = sj if d > 0 else d - 1.0
+    return out
+
+
+def face_quality(C, is_tri, nref, tri_scale=2.0 / np.sqrt(3.0)):
+    """Per element with corners ``C`` ((m, 4, 3); a triangle's fourth corner not read): the
+    smallest corner scaled Jacobian against its own unit normal (triangles times
+    ``tri_scale``), replaced by ``dot - 1`` (in [-2, -1]) where that normal points against
+    ``nref`` (m, 3) (a flipped element): :func:`shellmesh_mdao.smooth._face_quality`, the same
+    bits as its numpy version (``_corner_min_sj`` on ``_corner_normals``, einsum's dot)."""
+    C = np.ascontiguousarray(C, dtype=np.float64)
+    if C.ndim != 3 or C.shape[1:] != (4, 3):
+        raise ValueError(f"C must be an (m, 4, 3) array of corners, got shape {C.shape}")
+    is_tri = np.ascontiguousarray(is_tri, dtype=np.bool_).reshape(-1)
+    nref = np.ascontiguousarray(nref, dtype=np.float64).reshape(-1, 3)
+    if len(is_tri) != len(C) or len(nref) != len(C):
+        raise ValueError("is_tri and nref must have one entry per element")
+    return _face_quality(C, is_tri, nref, float(tri_scale))
 
 
 def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
@@ -1255,6 +1301,7 @@ def warm_up() -> float:
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
     min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]), np.array([[0.0, 0.0, 1.0]]))
     min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]))
+    face_quality(np.zeros((1, 4, 3)), np.array([True]), np.array([[0.0, 0.0, 1.0]]))
     stable_order(np.array([1, 0, 1]), 2)
     stable_pair_order(np.array([1, 0]), np.array([0, 1]), 2)
     closest_on_triangles(np.ones((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.eye(3)[1:2])

@@ -64,7 +64,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import closest_on_curves, min_corner_sj, ortho_gradient, ortho_jacobian
+from .kernels import closest_on_curves, face_quality, min_corner_sj, ortho_gradient, ortho_jacobian
 from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -1366,11 +1366,11 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
 def _face_quality(C, is_tri, nref):
     """Per element with corner positions ``C`` (k, 4, 3): the scaled Jacobian (own normal,
     :func:`_min_corner_sj`), replaced by ``dot - 1`` (in [-2, -1]) where the element's own
-    normal points against its reference normal ``nref`` (k, 3) (a flipped element)."""
-    nown = _corner_normals(C, is_tri)                   # computed once for both uses
-    sj = _corner_min_sj(C, is_tri, nown)
-    d = _dot(nown, nref)
-    return np.where(d > 0, sj, d - 1.0)
+    normal points against its reference normal ``nref`` (k, 3) (a flipped element). A compiled
+    loop (:func:`~shellmesh_mdao.kernels.face_quality`), the same bits as
+    ``np.where(d > 0, sj, d - 1)`` with ``nown = _corner_normals(C, is_tri)``,
+    ``sj = _corner_min_sj(C, is_tri, nown)`` and ``d = _dot(nown, nref)``."""
+    return face_quality(C, is_tri, nref, _TRI_SJ)
 
 
 def _support_normals(supports: Supports, P, verts):

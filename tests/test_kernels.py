@@ -238,6 +238,51 @@ def test_min_corner_sj_matches_the_numpy_corners(seed):
         assert np.array_equal(min_corner_sj(P, faces, is_tri, nr, _TRI_SJ), ref)
 
 
+def _face_quality_numpy(C, is_tri, nref):
+    """smooth._face_quality as it was before the compiled loop (the reference)."""
+    from shellmesh_mdao.mesh import dot_rows
+    from shellmesh_mdao.smooth import _corner_min_sj, _corner_normals
+    with np.errstate(all="ignore"):
+        nown = _corner_normals(C, is_tri)
+        sj = _corner_min_sj(C, is_tri, nown)
+        d = dot_rows(nown, nref)
+        return np.where(d > 0, sj, d - 1.0)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_face_quality_matches_the_numpy_version(seed):
+    """kernels.face_quality (smooth._face_quality, the untangling's measure) against the whole-
+    array numpy formulas, bit for bit: random quads and triangles over six decades of scale, a
+    zero-length edge, a degenerate element (zero normal: quality -1), flipped references,
+    a reference normal with a NaN and one with a signed zero, corners with inf."""
+    from shellmesh_mdao.kernels import face_quality
+    from shellmesh_mdao.smooth import _TRI_SJ, _face_quality
+    rng = np.random.default_rng(700 + seed)
+    m = 400
+    C = rng.normal(size=(m, 4, 3)) * 10.0 ** rng.uniform(-3, 3)
+    is_tri = rng.random(m) < 0.4
+    C[is_tri, 3] = rng.normal(size=(int(is_tri.sum()), 3))          # not read
+    C[::13, 1] = C[::13, 0]                                          # a zero-length edge
+    C[5] = C[5, 0]                                                   # every corner in one point
+    C[7, 2, 1] = np.inf
+    nref = rng.normal(size=(m, 3))
+    nref /= np.linalg.norm(nref, axis=1)[:, None]                    # unit, as the callers give
+    nref[::3] *= -1.0
+    nref[11] = [np.nan, 0.0, 1.0]
+    nref[12] = [-0.0, -0.0, -0.0]
+    for tri_rows in (is_tri, np.zeros(m, bool), np.ones(m, bool)):
+        ref = _face_quality_numpy(C, tri_rows, nref)
+        got = face_quality(C, tri_rows, nref, _TRI_SJ)
+        assert np.array_equal(got, ref, equal_nan=True)
+        assert np.array_equal(_face_quality(C, tri_rows, nref), ref, equal_nan=True)
+    assert ref[5] == -1.0 and np.isnan(ref[11])
+    assert ((ref >= -2) | np.isnan(ref)).all() and (ref[np.isfinite(ref)] <= 1.0 + 1e-12).all()
+    with pytest.raises(ValueError, match="corners"):
+        face_quality(C[:, :3], is_tri, nref)
+    with pytest.raises(ValueError, match="one entry per element"):
+        face_quality(C, is_tri[:-1], nref)
+
+
 def test_min_corner_sj_known_values():
     P = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, np.sqrt(3) / 2, 0], [0.3, 0.3, 0]])
     faces = np.array([[0, 1, 2, 3], [0, 1, 4, -1], [0, 1, 5, 3]])    # square, equilateral, dart
