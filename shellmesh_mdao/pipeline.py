@@ -386,7 +386,17 @@ def stage_merge(state: PipelineState) -> PipelineState:
     o = state.options
     mesh, res = merge_triangles(state.mesh, time_limit=o.merge_time_limit, mip_gap=o.merge_mip_gap,
                                 merge_bonus=o.merge_bonus)
-    sup = pipeline_supports(mesh, state.locator, state.infos)
+    # a merge joins two triangles of one component across an edge that is no feature edge: no
+    # point, feature edge or fixed vertex changes, nor any vertex's set of incident supports, so
+    # the split stage's supports hold as they are (the same arrays as deriving them again)
+    before = state.mesh
+    same = (state.supports is not None and state.supports.n == mesh.n_points
+            and np.array_equal(mesh.points, before.points)
+            and np.array_equal(mesh.feature_edges, before.feature_edges)
+            and np.array_equal(mesh.feature_edge_ids, before.feature_edge_ids)
+            and np.array_equal(mesh.fixed_vertices, before.fixed_vertices)
+            and mesh.component_names == before.component_names)
+    sup = state.supports if same else pipeline_supports(mesh, state.locator, state.infos)
     st = state.but(mesh=mesh, supports=sup, stage="merge")
     st.report["merge"] = {"status": res.status, "objective": float(res.objective), "mip_gap": float(res.mip_gap),
                           "n_merged": int(res.n_merged), "n_candidates": int(res.n_candidates),

@@ -17,7 +17,7 @@ from shellmesh_mdao.errors import ShellMeshError
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.quality import element_quality, scaled_jacobian
-from shellmesh_mdao.smooth import FIXED, PLANE, SURFACE
+from shellmesh_mdao.smooth import CURVE, FIXED, PLANE, SURFACE
 
 WING = dict(span=2.0, root_chord=1.0, tip_chord=0.6, sweep_deg=10.0, dihedral_deg=3.0)
 SIZE = 0.05
@@ -322,6 +322,23 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal():
     a, b = pl._finish_quads(st, q, sup), pl._finish_quads(st, q, sup)
     assert a["mesh"].points.tobytes() == b["mesh"].points.tobytes() and a["planar"] == b["planar"]
     assert np.array_equal(q.points, keep[0]) and np.array_equal(sup.kind, keep[1]) and np.array_equal(sup.ref, keep[2])
+
+
+def test_merge_keeps_the_split_supports():
+    """The merge stage hands on the split stage's supports: merging two triangles of one
+    component changes no point, feature edge or fixed vertex, nor any vertex's supports. They are
+    the same arrays and curves as deriving them again on the merged mesh."""
+    from shellmesh_mdao.smooth import pipeline_supports
+    st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="split").state
+    merged = pl.run_stage(st, "merge")
+    assert merged.supports is st.supports and merged.mesh.n_quads > 0
+    again = pipeline_supports(merged.mesh, st.locator, st.infos)
+    for name in ("kind", "ref", "comp_kind", "comp_ref", "edge_pairs", "edge_curve"):
+        assert getattr(again, name).tobytes() == getattr(merged.supports, name).tobytes(), name
+    assert len(again.curves) == len(merged.supports.curves)
+    for a, b in zip(again.curves, merged.supports.curves):
+        assert a.points.tobytes() == b.points.tobytes() and a.closed == b.closed
+    assert (np.asarray(again.kind) == SURFACE).any() and (np.asarray(again.kind) == CURVE).any()
 
 
 def test_stage_outputs_are_not_mutated():
