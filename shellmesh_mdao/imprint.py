@@ -965,11 +965,21 @@ def _on_segments(q, a, b, eps):
 
 
 def _arc_crossings(chains, arcs, eps):
-    """Points where arc i crosses the plane of chain j and lies on arc j (within eps)."""
+    """Points where arc i crosses the plane of chain j and lies on arc j (within eps). A pair
+    whose arc i lies, bounding box and all, farther than ``2 eps`` on one side of plane j is
+    skipped unread: none of its points is within ``eps`` of the plane nor on its other side
+    (the rounding of the plane distances is some 1e-16 of the model, eps 1e-9 of it)."""
     out = []
+    if not chains:
+        return out
+    pc = np.array([np.asarray(c.plane.point, float) for c in chains])
+    pn = np.array([np.asarray(c.plane.normal, float) for c in chains])
     for i, (ci, ai) in enumerate(zip(chains, arcs)):
         p = np.vstack([ai.points, ai.points[:1]]) if ai.closed else ai.points
-        for j, (cj, aj) in enumerate(zip(chains, arcs)):
+        lo, hi = (p.min(0) - pc) * pn, (p.max(0) - pc) * pn
+        apart = (np.minimum(lo, hi).sum(1) > 2 * eps) | (np.maximum(lo, hi).sum(1) < -2 * eps)
+        for j in np.flatnonzero(~apart).tolist():
+            cj, aj = chains[j], arcs[j]
             if i == j or cj.member == ci.member:
                 continue
             s = cj.plane.side(p)
