@@ -458,17 +458,17 @@ def stage_quad(state: PipelineState) -> PipelineState:
         wq = warp(q.points, q.faces)
         p99 = _warp_p99(q, wq)
         warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
-        if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal):
-            if o.planar_offset > 0 and o.warp_goal > 0:
-                # first the cheap way: the planarize move (and the settle and repair before it)
-                # on this pass's mesh; kept if it meets the goal, else the second pass runs on
-                # this pass's mesh as if it had not been tried
-                trial = _finish_quads(state, q, sup)
-                alone = trial["planar"]["warp_p99_after"]
-                warp_term["planarize_alone_p99"] = alone
-                if alone <= o.warp_goal:
-                    done = trial
-        if o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal) and done is None:
+        second_pass = o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal)
+        if second_pass and o.planar_offset > 0 and o.warp_goal > 0:
+            # first the cheap way: the planarize move (and the settle and repair before it) on
+            # this pass's mesh; kept if it meets the goal, else the second pass runs on this
+            # pass's mesh as if it had not been tried
+            trial = _finish_quads(state, q, sup)
+            alone = trial["planar"]["warp_p99_after"]
+            warp_term["planarize_alone_p99"] = alone
+            if alone <= o.warp_goal:
+                done, second_pass = trial, False
+        if second_pass:
             # only around the warped quads (two rings): the rest of the mesh keeps the first pass
             vptr, vface = vertex_faces(q.faces, q.n_points)
             warped = np.unique(q.faces[wq > o.warp_from])

@@ -912,7 +912,10 @@ def _nearest_other(P, verts):
 class _Background:
     """``fn(*args)`` in a thread of its own from now on; :meth:`result` waits for its value (or
     raises its exception). For work that releases the GIL (a KD-tree query) beside numpy and
-    SuperLU work in the caller's thread; the value is the same as a call in the caller's."""
+    SuperLU work in the caller's thread; the value is the same as a call in the caller's. One
+    short-lived thread per call rather than a shared ``concurrent.futures`` pool: a pool's idle
+    worker does not survive a ``fork`` (a study's multiprocessing pool), and the child's
+    ``submit`` would wait for it forever."""
 
     def __init__(self, fn, *args):
         self._out: list = []
