@@ -92,7 +92,9 @@ class PipelineOptions:
                           ``planar_offset`` move alone does not bring them to it (tried first on the
                           first pass's mesh: cheaper, and it keeps the scaled Jacobians; on the corpus
                           only straight_wing needs the pass), moving only the nodes within two rings of
-                          the quads warped more than ``warp_from``. Default 300; 0 drops the pass.
+                          the quads that move left warped more than ``warp_goal`` (with
+                          ``planar_offset`` 0: of the quads warped more than ``warp_from``). Default
+                          300; 0 drops the pass.
     ``smooth_warp_weight`` the same term in the smoothing before subdivision. Default 300 (bwb's
                           warp p99 10.5 -> 9.7 degrees); 0 drops it.
     ``smooth_warp_spread`` the term before subdivision leaves out the quads that share a vertex with
@@ -438,8 +440,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
     off the input by at most ``planar_offset`` times the size (:func:`~shellmesh_mdao.quad.planarize`;
     report key ``planarize``). Where the warp p99 is above ``warp_goal`` after the final smoothing
     and that last move alone does not bring it to the goal, a second smoothing pass with the quad
-    planarity term runs first, around the warped quads (``final_warp_weight``; report key
-    ``final_smooth.warp_term``)."""
+    planarity term runs first, around the quads that move left above the goal (``final_warp_weight``;
+    report key ``final_smooth.warp_term``)."""
     from .mesh import vertex_faces
     from .quad import subdivide_to_quads
     from .smooth import _face_rings, mesh_figures, smooth
@@ -459,19 +461,28 @@ def stage_quad(state: PipelineState) -> PipelineState:
         p99 = _warp_p99(q, wq)
         warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
         second_pass = o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal)
+        trial = None
         if second_pass and o.planar_offset > 0 and o.warp_goal > 0:
             # first the cheap way: the planarize move (and the settle and repair before it) on
             # this pass's mesh; kept if it meets the goal, else the second pass runs on this
-            # pass's mesh as if it had not been tried
+            # pass's mesh, around the quads that move left above the goal
             trial = _finish_quads(state, q, sup)
             alone = trial["planar"]["warp_p99_after"]
             warp_term["planarize_alone_p99"] = alone
             if alone <= o.warp_goal:
                 done, second_pass = trial, False
         if second_pass:
-            # only around the warped quads (two rings): the rest of the mesh keeps the first pass
+            # only around the quads still warped (two rings): the rest of the mesh keeps the first
+            # pass. With the planarize trial: the quads it left above the goal (it flattens the
+            # others without the pass); without it, every quad in the planarity term
             vptr, vface = vertex_faces(q.faces, q.n_points)
-            warped = np.unique(q.faces[wq > o.warp_from])
+            if trial is not None:
+                tm = trial["mesh"]
+                seeds = warp(tm.points, tm.faces) > o.warp_goal
+            else:
+                seeds = wq > o.warp_from
+            warp_term["seed_quads"] = int(seeds.sum())
+            warped = np.unique(q.faces[seeds])
             region = _face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
             movable = np.unique(q.faces[region])
             movable = movable[movable >= 0]
