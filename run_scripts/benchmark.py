@@ -4,6 +4,7 @@
     python run_scripts/benchmark.py --quick               # two small cases, no 1M-triangle run (~2 min)
     python run_scripts/benchmark.py --only bwb            # one corpus geometry
     python run_scripts/benchmark.py --no-memory           # skip the 1M-triangle peak-memory run
+    python run_scripts/benchmark.py --only bwb --perturb 3   # bwb, then 3 perturbed copies of its input
     python run_scripts/benchmark.py --from-json docs/benchmarks.json   # re-render the page only
 
 What it runs, each case in its own fresh child process (``multiprocessing`` "spawn") with a time
@@ -20,6 +21,10 @@ and so the peak resident memory of every case (``ru_maxrss`` of the child) is it
 3. **Memory target** -- cessna210 midpoint-subdivided to >= 1M triangles (:func:`refine_surface`,
    the same faceted surface, so the same mesh is expected), the pipeline at size 0.25 with its
    peak RSS and time.
+4. **Robustness** (``--perturb K``, default 3 in a full run) -- every corpus case and the
+   performance case again on K copies of its input with coordinates multiplied by
+   ``1 + 1e-10 g`` (:func:`perturbed_surface`): how many runs meet each target, and the range of
+   each figure; a target met with less margin than the run-to-run spread shows here.
 
 "Same size" for Gmsh: it triangulates at ``2 * size`` and its subdivision halves every edge, so its
 final quads have edges of about ``size`` -- what the pipeline does too (remesh at
@@ -68,6 +73,8 @@ PERF_CASE = ("cessna210", 0.25, 12)
 MEMORY_CASE = ("cessna210", 1_000_000, 0.25)
 #: Budget of the memory target (GB).
 MEMORY_BUDGET_GB = 24.0
+#: Relative size of the coordinate perturbation of the robustness runs (``--perturb``).
+PERTURB_SCALE = 1e-10
 #: Feature angle of Gmsh's classifySurfaces (degrees).
 GMSH_FEATURE_ANGLE = 40.0
 KEEP_MARKER = "<!-- everything below this line is kept by run_scripts/benchmark.py -->"
@@ -169,11 +176,27 @@ def target_checks(fig: dict) -> dict:
 PIPELINE_LAZY_IMPORTS = ("trimesh", "triangle", "highspy", "igl", "scipy.sparse.csgraph")
 
 
-def run_shellmesh(surface, manifest: dict, name: str, size: float, ribs: int = RIBS, spars=SPARS) -> dict:
+def perturbed_surface(surface, seed: int, scale: float = PERTURB_SCALE):
+    """The surface at ``surface`` (path) with every coordinate multiplied by ``1 + scale * g``,
+    ``g`` standard normal from ``numpy.random.default_rng(seed)``: the same geometry to far below
+    any tolerance of the pipeline, other rounding (what another machine's maths library or
+    another CAD export would give)."""
+    from shellmesh_mdao.load import load_surface
+    from shellmesh_mdao.mesh import ShellMesh
+
+    mesh, _ = load_surface(surface)
+    P = mesh.points * (1.0 + scale * np.random.default_rng(seed).standard_normal(mesh.points.shape))
+    return ShellMesh(P, mesh.faces, mesh.component, list(mesh.component_names))
+
+
+def run_shellmesh(surface, manifest: dict, name: str, size: float, ribs: int = RIBS, spars=SPARS,
+                  perturb: int | None = None) -> dict:
     """Run the whole pipeline on ``surface`` (path) with the layout of geometry ``name`` in
-    ``manifest`` (``ribs`` per wing, spars at chord fractions ``spars``) at quad size ``size``.
+    ``manifest`` (``ribs`` per wing, spars at chord fractions ``spars``) at quad size ``size``;
+    ``perturb``: the seed of :func:`perturbed_surface` (read before the clock starts).
     Returns wall and CPU seconds (``time.process_time``: every thread of the process), seconds per
-    stage, the split/merge solver statuses, the input triangle count and :func:`mesh_figures`."""
+    stage, the split/merge solver statuses, whether the quad stage's second final pass ran, the
+    input triangle count and :func:`mesh_figures`."""
     from shellmesh_mdao.layout import layout_from_manifest
     from shellmesh_mdao.pipeline import run_pipeline
 
@@ -189,12 +212,14 @@ def run_shellmesh(surface, manifest: dict, name: str, size: float, ribs: int = R
     # the numba kernels: loaded from their cache (compiled on a new install), like an import
     jit_s = warm_up()
     layout = layout_from_manifest(manifest, name, ribs=ribs, spars=spars)
+    src = str(surface) if perturb is None else perturbed_surface(surface, perturb)
     t0, c0 = time.perf_counter(), time.process_time()
-    res = run_pipeline(str(surface), layout, size, progress=False)
+    res = run_pipeline(src, layout, size, progress=False)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     rep = res.report
     return {"wall_s": wall, "cpu_s": cpu, "jit_load_s": round(jit_s, 3), "stages": dict(rep.get("stages", {})),
             "split": rep.get("split"), "merge": rep.get("merge"),
+            "second_pass": bool(((rep.get("final_smooth") or {}).get("warp_term") or {}).get("applied")),
             "n_input_triangles": (rep.get("surface") or {}).get("n_triangles"),
             "ribs_per_wing": ribs, "spars": list(spars), "figures": mesh_figures(res.mesh, size)}
 
@@ -381,13 +406,14 @@ def compare_case(surface, manifest, name, size, ribs=RIBS, spars=SPARS, *, timeo
 
 
 def run_benchmark(geometry_dir, *, only=None, quick: bool = False, perf: bool = True, memory: bool = True,
-                  work_dir=None, timeout: float = 3600.0, gmsh_timeout: float = 1800.0) -> dict:
+                  work_dir=None, timeout: float = 3600.0, gmsh_timeout: float = 1800.0, perturb: int = 0) -> dict:
     """Run the benchmark and return the raw figures (what docs/benchmarks.json holds).
 
     ``only``: one corpus geometry (its corpus case; plus the performance / memory case when
     they use it). ``quick``: :data:`QUICK_CASES` only. ``perf``/``memory``: run the performance
     and 1M-triangle memory cases. ``work_dir``: where the refined STL goes (default a folder in
-    the temporary directory)."""
+    the temporary directory). ``perturb``: run every corpus case and the performance case again
+    on that many perturbed copies of its input (:func:`perturbed_surface`, seeds 0, 1, ...)."""
     import tempfile
 
     gdir = Path(geometry_dir)
@@ -406,7 +432,7 @@ def run_benchmark(geometry_dir, *, only=None, quick: bool = False, perf: bool = 
                        "gmsh": gmsh.__version__,
                        "memory_gb": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1)},
            "started": time.strftime("%Y-%m-%d %H:%M"), "load_start": _load(), "quick": bool(quick),
-           "only": only, "corpus": [], "performance": None, "memory": None,
+           "only": only, "corpus": [], "performance": None, "memory": None, "robustness": [],
            "remesh_factor": pipeline.REMESH_FACTOR}
     if quick:
         cases = [(n, s, r) for n, s, r in QUICK_CASES if only in (None, n)]
@@ -423,6 +449,18 @@ def run_benchmark(geometry_dir, *, only=None, quick: bool = False, perf: bool = 
         _log(f"performance target: {pname} at size {psize}, {pribs} ribs + {len(SPARS)} spars per wing")
         res["performance"] = compare_case(gdir / geos[pname]["file"], manifest, pname, psize, pribs,
                                           timeout=timeout, gmsh_timeout=gmsh_timeout)
+    rob = [(n, s, r) for n, s, r in cases]
+    if res["performance"] is not None:
+        rob.append(PERF_CASE)
+    for name, size, ribs in (rob if perturb > 0 else []):
+        runs = []
+        for seed in range(int(perturb)):
+            o = run_in_child(run_shellmesh, str(gdir / geos[name]["file"]), manifest, name, size, ribs, SPARS,
+                             perturb=seed, timeout=timeout)
+            runs.append(o)
+            _log(f"  perturbed {name} @ {size}, {ribs} ribs, seed {seed}: {_summary(o)}")
+        res["robustness"].append({"name": name, "size": size, "ribs_per_wing": ribs, "scale": PERTURB_SCALE,
+                                  "runs": runs})
     mname, mtris, msize = MEMORY_CASE
     if memory and only in (None, mname) and mname in geos:
         wdir = Path(work_dir) if work_dir else Path(tempfile.gettempdir()) / "shellmesh_benchmark"
@@ -521,6 +559,46 @@ def _time_row(case: dict) -> str:
     return (f"| {case['name']} | {case['size']:g} | {case['ribs_per_wing']} | {ow} | {oc} | {om} | {gw} | {gc} | {gm} | "
             f"{_f(case.get('time_ratio'), '{:.1f}')} | {_f(case.get('cpu_ratio'), '{:.1f}')} | "
             f"{case['load_before']:.1f} / {case['load_after']:.1f} |")
+
+
+def _robustness_section(rob: list) -> list[str]:
+    """The page's section on the perturbed runs: per case and target, how many runs meet it and
+    the range of its figure; the wall-time range and how many runs needed the second final pass."""
+    scale = rob[0].get("scale", PERTURB_SCALE)
+    L = ["## Robustness under input perturbation", "",
+         (f"Each case again on {len(rob[0]['runs'])} copies of its input whose coordinates are multiplied by "
+         f"`1 + {scale:g} g` (`g` standard normal, seeds 0, 1, ...; `--perturb`): the same geometry to far below "
+         "any tolerance, other rounding, as another machine's maths library or another export of the same CAD "
+         "would give. The meshes differ (the discrete stages branch on rounding), so each figure below is a "
+         "range, followed by how many runs meet its target. A target met in the table above but not in every "
+         "run here has a margin below the run-to-run spread."), "",
+         "| geometry | size | ribs / wing | " + " | ".join(f"{TARGETS[k][0]} ({_bound_text(*TARGETS[k][1:])})"
+                                                    for k in TARGETS) + " | all targets | second final pass | wall s |",
+         "| --- | --- | --- | " + " | ".join("---" for _ in TARGETS) + " | --- | --- | --- |"]
+    for c in rob:
+        ok = [r for r in c["runs"] if r.get("status") == "ok"]
+        n = len(c["runs"])
+        if not ok:
+            L.append(f"| {c['name']} | {c['size']:g} | {c['ribs_per_wing']} | no run finished: "
+                     f"{_status(c['runs'][0]) if c['runs'] else '—'} |")
+            continue
+        cells = []
+        for k in TARGETS:
+            vals = [r["figures"][k] for r in ok if r["figures"].get(k) is not None]
+            if not vals:
+                cells.append("—")
+                continue
+            met = sum(bool(target_checks(r["figures"])[k]) for r in ok)
+            fmt = "{:.0f}" if k == "n_sj_le_0.2" else ("{:.2f}" if k in ("quad_percent", "angles_ok_percent",
+                                                                         "warp_p99") else "{:.4f}")
+            rng = fmt.format(min(vals)) if min(vals) == max(vals) else f"{fmt.format(min(vals))}–{fmt.format(max(vals))}"
+            cells.append(f"{rng}; {met}/{n}")
+        allm = sum(all(v is not False for v in target_checks(r["figures"]).values()) for r in ok)
+        walls = [r["wall_s"] for r in ok]
+        L.append(f"| {c['name']} | {c['size']:g} | {c['ribs_per_wing']} | " + " | ".join(cells)
+                 + f" | {allm}/{n} | {sum(bool(r.get('second_pass')) for r in ok)}/{len(ok)} | "
+                 f"{min(walls):.1f}–{max(walls):.1f} |")
+    return L + [""]
 
 
 def render_page(res: dict, keep: str = "") -> str:
@@ -630,6 +708,10 @@ def render_page(res: dict, keep: str = "") -> str:
         else:
             L += [f"Result: not measured (shellmesh: {_status(o)}, Gmsh: {_status(g)}).", ""]
 
+    # ---- robustness
+    if res.get("robustness"):
+        L += _robustness_section(res["robustness"])
+
     # ---- memory target
     mm = res.get("memory")
     if mm is not None:
@@ -701,6 +783,9 @@ def main(argv=None) -> int:
     ap.add_argument("--work-dir", help="folder for the refined 1M-triangle STL (default: temporary directory)")
     ap.add_argument("--timeout", type=float, default=3600.0, help="time limit per pipeline case (s)")
     ap.add_argument("--gmsh-timeout", type=float, default=1800.0, help="time limit per Gmsh case (s)")
+    ap.add_argument("--perturb", type=int, default=None, metavar="K",
+                    help="run every corpus case and the performance case again on K perturbed copies of its input "
+                         "(coordinates x (1 + 1e-10 g)); default 3 for a full run, 0 for --quick / --only")
     ap.add_argument("--from-json", metavar="JSON", help="re-render the page from the raw figures of an earlier run "
                                                          "(written beside it; nothing is run)")
     args = ap.parse_args(argv)
@@ -714,7 +799,8 @@ def main(argv=None) -> int:
     if not (gdir / "manifest.json").is_file():
         ap.error(f"no manifest.json in {gdir}: pass --geometry-dir (the benchmark corpus folder)")
     res = run_benchmark(gdir, only=args.only, quick=args.quick, perf=not args.no_perf, memory=not args.no_memory,
-                        work_dir=args.work_dir, timeout=args.timeout, gmsh_timeout=args.gmsh_timeout)
+                        work_dir=args.work_dir, timeout=args.timeout, gmsh_timeout=args.gmsh_timeout,
+                        perturb=(0 if (args.quick or args.only) else 3) if args.perturb is None else args.perturb)
     out = args.out or (None if (args.quick or args.only) else REPO / "docs" / "benchmarks.md")
     if out is None:
         print(render_page(res))

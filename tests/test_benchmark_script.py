@@ -132,3 +132,37 @@ def test_quick_case_writes_page_and_json(geometry_dir, tmp_path):
     p2 = B.render_page(res2)
     assert B.render_page(res2) == p2
     assert "## Performance target" in p2 and "Result: **" in p2 and "## Memory target" in p2
+
+
+def test_perturbed_surface_is_the_same_geometry_with_other_rounding(geometry_dir):
+    """--perturb's inputs: the corpus surface with every coordinate moved by about 1e-10 of
+    itself, the same faces; one seed gives the same copy every time, two seeds two copies."""
+    from shellmesh_mdao.load import load_surface
+
+    path = geometry_dir / "bwb.stl"
+    ref, _ = load_surface(path)
+    a, b, c = (B.perturbed_surface(path, s) for s in (0, 0, 1))
+    assert np.array_equal(a.faces, ref.faces) and np.array_equal(a.component, ref.component)
+    rel = np.abs(a.points - ref.points) / np.maximum(np.abs(ref.points), 1e-300)
+    assert 0 < rel.max() < 1e-8 and np.median(rel[ref.points != 0]) > 1e-12
+    assert a.points.tobytes() == b.points.tobytes() and a.points.tobytes() != c.points.tobytes()
+
+
+def test_robustness_section_counts_the_runs_meeting_each_target():
+    """The robustness table: per target the range of the figure over the perturbed runs and how
+    many meet it; all-target and second-pass counts; a failed run counts as not meeting."""
+    fig = {"quad_percent": 100.0, "n_sj_le_0.2": 0, "mean_sj_skin": 0.9512, "mean_sj_members": 0.96,
+           "angles_ok_percent": 98.0, "warp_p99": 9.5, "median_edge_ratio": 0.76}
+    low = dict(fig, mean_sj_skin=0.9497, warp_p99=10.4)
+    runs = [{"status": "ok", "figures": fig, "wall_s": 3.0, "second_pass": False},
+            {"status": "ok", "figures": low, "wall_s": 4.0, "second_pass": True},
+            {"status": "error", "error": "boom"}]
+    rows = [r for r in B._robustness_section([{"name": "swept_wing", "size": 0.02, "ribs_per_wing": 10,
+                                                "scale": 1e-10, "runs": runs}]) if r.startswith("| swept_wing")]
+    assert len(rows) == 1
+    cells = [c.strip() for c in rows[0].strip("|").split("|")]
+    col = {k: 3 + i for i, k in enumerate(B.TARGETS)}
+    assert cells[col["mean_sj_skin"]] == "0.9497–0.9512; 1/3"
+    assert cells[col["warp_p99"]] == "9.50–10.40; 1/3"
+    assert cells[col["quad_percent"]] == "100.00; 2/3"
+    assert cells[-3:] == ["1/3", "1/2", "3.0–4.0"]
