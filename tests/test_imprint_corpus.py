@@ -16,6 +16,8 @@ For every geometry of manifest.json, both wings, 10 ribs and spars at 0.15/0.65 
 These corpus cases are marked slow (a few minutes); a quick synthetic case checks improve_skin's
 local repair on its own (a member crossing a crease right next to a crease vertex).
 """
+import copy
+
 import numpy as np
 import pytest
 
@@ -239,3 +241,44 @@ def test_improve_skin_repairs_chain_crossing_a_crease_next_to_its_vertex():
     out2 = improve_skin(mesh2, loc, chains2)
     assert np.array_equal(out.points, out2.points) and np.array_equal(out.faces, out2.faces)
     assert np.array_equal(out.feature_edges, out2.feature_edges)
+
+
+def test_improve_skin_rounds_work_near_the_chains_and_the_poor_triangles_only():
+    """improve_skin's flip and smoothing rounds touch only the vertices within ``rings`` edge rings
+    of a chain and one ring of a triangle with an angle below ``poor_angle``: elsewhere the skin
+    is the remesh's, which the cut did not change. A sliver far from the chain is still improved;
+    with ``rings=None`` the rounds cover the whole skin (and move vertices far from the chain)."""
+    from shellmesh_mdao.imprint import _rings_around
+
+    n = 24
+    skin = _roof(n)
+    P = skin.points.copy()
+    far = int(np.flatnonzero(np.isclose(P[:, 0], 3 / n) & np.isclose(P[:, 1], 5 / n))[0])
+    P[far, 0] += 0.45 / n                                       # a sliver fan far from the member
+    P[far, 2] = 0.3 * min(P[far, 1], 1 - P[far, 1])
+    skin = ShellMesh(P, skin.faces, feature_edges=skin.feature_edges, feature_edge_ids=skin.feature_edge_ids)
+    plane = Plane.make([0.5, 0.5, 0.15], [1.0, 0.05, 0.0])
+    bounds = (Plane.make([0, 0.15, 0], [0, 1.0, 0]), Plane.make([0, 0.85, 0], [0, -1.0, 0]))
+    spec = ChainSpec("rib", "upper", plane, bounds, np.array([0.5, 0.5, 0.15]), -1)
+    mesh, chains = imprint_chains(skin, skin.points, skin.faces[:, :3], [spec])
+    loc = SurfaceLocator(skin.points, skin.faces[:, :3])
+    T = mesh.faces[:, :3]
+    ang = _tri_angles_min(mesh.points, T)
+    seed = np.zeros(mesh.n_points, bool)
+    seed[chains[0].vertices] = True
+    region = _rings_around(T, seed, 3)
+    poor = np.zeros(mesh.n_points, bool)
+    poor[T[ang < 30.0]] = True
+    region |= _rings_around(T, poor, 1)
+    assert region[far] and not region.all() and (ang[(T == far).any(1)] < 30.0).any()
+    out = improve_skin(copy.deepcopy(mesh), loc, copy.deepcopy(chains))
+    assert out.n_points == mesh.n_points                        # no repair needed: same vertices
+    moved = np.any(out.points != mesh.points, axis=1)
+    assert moved.any() and not moved[~region].any()             # the rounds stay in the region
+    outside = np.sort(np.sort(T, 1)[(~region[T]).all(1)], 0)
+    assert len(outside) and np.array_equal(
+        np.sort(np.sort(out.faces[:, :3], 1)[(~region[out.faces[:, :3]]).all(1)], 0), outside)   # nor flip there
+    star = (out.faces[:, :3] == far).any(1)
+    assert _tri_angles_min(out.points, out.faces[star, :3]).min() > ang[(T == far).any(1)].min() + 1.0
+    whole = improve_skin(copy.deepcopy(mesh), loc, copy.deepcopy(chains), rings=None)
+    assert np.any(whole.points[~region] != mesh.points[~region])
