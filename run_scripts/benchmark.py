@@ -449,9 +449,7 @@ def run_benchmark(geometry_dir, *, only=None, quick: bool = False, perf: bool = 
         _log(f"performance target: {pname} at size {psize}, {pribs} ribs + {len(SPARS)} spars per wing")
         res["performance"] = compare_case(gdir / geos[pname]["file"], manifest, pname, psize, pribs,
                                           timeout=timeout, gmsh_timeout=gmsh_timeout)
-    rob = [(n, s, r) for n, s, r in cases]
-    if res["performance"] is not None:
-        rob.append(PERF_CASE)
+    rob = list(cases) + ([PERF_CASE] if res["performance"] is not None else [])
     for name, size, ribs in (rob if perturb > 0 else []):
         runs = []
         for seed in range(int(perturb)):
@@ -580,7 +578,7 @@ def _robustness_section(rob: list) -> list[str]:
         n = len(c["runs"])
         if not ok:
             L.append(f"| {c['name']} | {c['size']:g} | {c['ribs_per_wing']} | no run finished: "
-                     f"{_status(c['runs'][0]) if c['runs'] else '—'} |")
+                     f"{_status(c['runs'][0]) if c['runs'] else '—'} |" + " — |" * (len(TARGETS) + 2))
             continue
         cells = []
         for k in TARGETS:

@@ -1402,19 +1402,6 @@ def _angles3(Pn):
     return np.minimum(np.minimum(ang[:, 0], ang[:, 1]), ang[:, 2])
 
 
-def _rings_around(T, seed, rings):
-    """(n,) bool: the vertices at most ``rings`` edges away from a vertex of ``seed`` ((n,) bool)
-    in the triangulation ``T``."""
-    near = seed.copy()
-    E = T[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    for _ in range(rings):
-        grow = near.copy()
-        grow[E[near[E[:, 0]], 1]] = True
-        grow[E[near[E[:, 1]], 0]] = True
-        near = grow
-    return near
-
-
 def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain: float = 0.5,
                  min_angle: float = 10.0, passes: int = 8, max_repairs: int | None = None,
                  rings: int | None = 3, poor_angle: float = 30.0) -> ShellMesh:
@@ -1462,13 +1449,15 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
         # only where the cut changed the skin or the skin is poor: the rest is the remesh's, which
         # the imprint did not touch (rounds over the whole skin cost 0.3 s more on cessna210 for
         # the same figures, docs/benchmarks.md)
-        seed = np.zeros(len(P), bool)
-        for v in chain_vs:
-            seed[v] = True
-        active = _rings_around(T, seed, int(rings))
-        seed[:] = False
-        seed[T[_tri_angles_min(P, T) < poor_angle]] = True
-        active |= _rings_around(T, seed, 1)
+        from .smooth import _face_rings
+
+        ptr, vf = vertex_faces(T, len(P))
+        active = np.zeros(len(P), bool)
+        for seed, r in ((np.unique(np.concatenate(chain_vs)), int(rings)),
+                        (np.unique(T[_tri_angles_min(P, T) < poor_angle]), 1)):
+            active[seed] = True
+            if r > 0:
+                active[T[_face_rings(T, ptr, vf, seed, r)]] = True
         movable &= active
     with np.errstate(invalid="ignore"):
         for _ in range(rounds):
