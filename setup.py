@@ -19,7 +19,6 @@ setup(
         "openmdao>=3.30",
         "trimesh>=4.0",
         "embreex>=2.17",
-        "libigl>=2.5",
         "rtree>=1.0",
         "pyvista>=0.43",
         "highspy>=1.7",

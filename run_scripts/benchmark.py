@@ -173,7 +173,7 @@ def target_checks(fig: dict) -> dict:
 # ============================================================================ the two meshers
 #: modules the pipeline's stages import lazily; imported before the clock (imports are excluded
 #: from both meshers' times)
-PIPELINE_LAZY_IMPORTS = ("trimesh", "triangle", "highspy", "igl", "scipy.sparse.csgraph")
+PIPELINE_LAZY_IMPORTS = ("trimesh", "triangle", "highspy", "scipy.sparse.csgraph")
 
 
 def perturbed_surface(surface, seed: int, scale: float = PERTURB_SCALE):

@@ -334,12 +334,55 @@ def test_spar_web_lower_than_the_element_size_allows_is_refused(manifest, locato
         run_pipeline(path, lay, 0.02, until="project", progress=False)
 
 
-def test_closest_without_libigl_falls_back_to_vtk(monkeypatch):
-    import sys
-    monkeypatch.setitem(sys.modules, "igl", None)       # import igl -> ImportError
-    P, T = soup(120, seed=4)
+def brute_pick(P, T, x):
+    """The rule of SurfaceLocator.closest by checking every triangle: the least squared
+    distance (numpy's row-norm sum), then the lowest triangle index; and that point."""
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    p = closest_point_on_triangles(np.broadcast_to(x, a.shape), a, b, c)
+    e = p - x
+    d2 = (e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]) + e[:, 2] * e[:, 2]
+    j = int(np.flatnonzero(d2 == d2.min())[0])
+    return j, p[j]
+
+
+@pytest.mark.parametrize("make", [sphere, soup])
+def test_closest_picks_the_lowest_of_equidistant_triangles(make):
+    """On a vertex or an edge several triangles are equally near: the locator's answer is the
+    brute-force rule's (least distance, lowest index), triangle and point, bit for bit."""
+    P, T = make()
     loc = SurfaceLocator(P, T)
-    q = np.random.default_rng(2).uniform(-2, 2, (60, 3))
-    cp, tri, dist = loc.closest(q)
-    assert loc._tree()[0] == "vtk"
-    assert np.abs(dist - brute_closest(P, T, q)).max() <= 1e-12 * loc.diagonal
+    rng = np.random.default_rng(11)
+    q = np.vstack([P[T[:40, 1]],                                          # on vertices
+                   0.5 * (P[T[:40, 1]] + P[T[:40, 2]]),                   # on edges
+                   P[T[:40, 0]] + 1e-3 * rng.normal(size=(40, 3)),        # just off vertices
+                   rng.uniform(-1.2, 1.2, (80, 3))])
+    cp, tri, _ = loc.closest(q)
+    ref = [brute_pick(loc._local, T, x - loc._center) for x in q]
+    assert np.array_equal(tri, [j for j, _ in ref])
+    assert np.array_equal(cp, np.array([x for _, x in ref]) + loc._center)
+    # ties really occur here: the vertices are shared by five or six triangles of the sphere
+    if make is sphere:
+        assert (tri[:40] != np.arange(40)).any()
+
+
+def test_closest_does_not_depend_on_threads_batches_or_order():
+    """The answers are the same for one thread and two, for a batch answered in blocks and
+    the points one by one, and for the points in reverse order."""
+    from shellmesh_mdao.kernels import TriangleBVH
+    P, T = sphere(4)                                              # 5120 triangles
+    rng = np.random.default_rng(5)
+    q = np.vstack([P[rng.integers(0, len(P), 3000)], rng.uniform(-1.5, 1.5, (3000, 3))])
+    bvh = TriangleBVH(P, T)
+    one = bvh.closest(q, threads=1)
+    two = bvh.closest(q, threads=2)                               # two blocks of 3000
+    rev = bvh.closest(q[::-1], threads=2)
+    for a, b in zip(one, two):
+        assert np.array_equal(a, b)
+    for a, b in zip(one, rev):
+        assert np.array_equal(a, b[::-1])
+    single = [bvh.closest(q[i:i + 1]) for i in range(0, len(q), 97)]
+    assert np.array_equal(np.vstack([s[0] for s in single]), one[0][::97])
+    assert np.array_equal(np.concatenate([s[1] for s in single]), one[1][::97])
+    # and a leaf size of 1 (a deeper tree) gives the same answers
+    deep = TriangleBVH(P, T, leaf=1).closest(q)
+    assert np.array_equal(deep[1], one[1]) and np.array_equal(deep[0], one[0])

@@ -119,8 +119,16 @@ def test_bwb_sweep_layouts_found_by_the_imprint_fixes(manifest, geometry_dir, se
     with faults that the sweep's checks caught: seed 24, a rib crossing the sharp trailing edge snapped
     a skin vertex onto the edge opposite it (zero-area triangles, 5 folded quads); seed 148, spar_0
     (c=0.075) one skin edge behind the rounded leading edge, so its web ran along a skin edge (edges
-    with 4 and 5 faces). Both must now meet every guarantee."""
+    with 4 and 5 faces). Seed 24 must now meet every guarantee. Seed 148's spar web is 0.36 element
+    sizes tall, under the documented 0.4: whether its upper and lower chains keep apart behind the
+    leading edge depends on the last bits of the skin (meshed until 2026-11-24; since the closest
+    points pick the lowest of equally near input triangles, its lower chain runs into the upper
+    one's vertices there), so it must meet every guarantee or be refused with that documented
+    reason, never give a faulty mesh."""
     case = SL.draw_case(seed, "bwb", manifest=manifest, geometry_dir=geometry_dir)
     r = SL.run_case(case, geometry_dir, manifest)
+    if seed == 148 and r["outcome"] == "invalid layout":
+        assert r["stage"] == "imprint" and "spar web 0.36 element sizes tall" in r["reason"], r
+        return
     assert r["outcome"] == "ok", f"{case}: {r['outcome']} at stage {r['stage']}: {r['reason']}: {r['error']}"
     assert r["min_sj"] > 0.2 and r["n_poor"] == 0

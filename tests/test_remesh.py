@@ -9,12 +9,15 @@ from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.project import SurfaceLocator
 from shellmesh_mdao.remesh import DEFAULT_DEVIATION_FRACTION, improve_triangles, remesh_skin, remesh_statistics
 
-# final quad size H per corpus geometry (the remesher works at 2 H) and the smallest
-# triangle angle measured on the result (docs/remesh.md); the tests allow about 2 degrees less
-# than the lower of two machines' figures (the result differs in the last bits from CPU to CPU:
-# straight_wing 13.8 / 12.7, cessna210 15.3 / 12.95 degrees)
+# final quad size H per corpus geometry (the remesher works at 2 H) and a floor under the
+# smallest triangle angle of the result (docs/remesh.md). That angle is one triangle's and
+# moves with the last bits of the input: on the input and seven copies with coordinates
+# multiplied by 1 + 1e-10 g (fourteen for bwb) it spans straight_wing 0.0 (one copy, with
+# libigl's closest points too; 11.8 otherwise) to 25.8, swept_wing 20.2-23.4, bwb 18.2-21.0
+# (6.6-21.7 with libigl's closest points, before 2026-11-24), cessna210 11.2-17.4 degrees.
+# The floors hold for the input itself.
 SIZES = {"straight_wing": 0.04, "swept_wing": 0.02, "bwb": 0.3, "cessna210": 0.25}
-MIN_ANGLE = {"straight_wing": 11.0, "swept_wing": 19.0, "bwb": 19.0, "cessna210": 11.0}
+MIN_ANGLE = {"straight_wing": 11.0, "swept_wing": 19.0, "bwb": 15.0, "cessna210": 10.0}
 # largest edge-midpoint distance to the input, in units of max_deviation (measured:
 # 2.41 / 0.96 / 1.00 / 1.08; the straight wing's revolved tip caps are thinner than the
 # local edge length and get cut across)
@@ -28,6 +31,16 @@ def _angles(P, F):
         return np.degrees(np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), (u * v).sum(1)))
     a0, a1 = ang(b - a, c - a), ang(c - b, a - b)
     return np.stack([a0, a1, 180.0 - a0 - a1], 1)
+
+
+def _best_equidistant_dot(P, T, nin, x, n, diag):
+    """Largest dot product of ``n`` with the normals of the input triangles nearest to ``x``
+    (all of them within 1e-12 of the model size of the least distance: the sheets of a
+    zero-thickness part are equally near)."""
+    from shellmesh_mdao.kernels import closest_on_triangles
+    A, B, C = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    d = np.linalg.norm(closest_on_triangles(np.broadcast_to(x, A.shape), A, B, C) - x, axis=1)
+    return float((nin[d <= d.min() + 1e-12 * diag] @ n).max())
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +85,9 @@ def test_corpus_remesh_is_valid_and_on_size(corpus, name):
     # corner's closest triangle can be on the other side, so a face is flipped only if it
     # disagrees with both. Faces standing across a tip cap thinner than the local size
     # (|dot| small, straight_wing only) are counted, at most 0.1 % of the faces.
+    # Where the input has two sheets at the same place (a zero-thickness fin or trailing
+    # edge), several input triangles facing opposite ways are equally near: the face is
+    # measured against the best of them.
     tris, _ = skin.triangles()
     Pn = skin.points
     nin = np.cross(Pn[tris[:, 1]] - Pn[tris[:, 0]], Pn[tris[:, 2]] - Pn[tris[:, 0]])
@@ -81,6 +97,9 @@ def test_corpus_remesh_is_valid_and_on_size(corpus, name):
     _, ct, _ = loc.closest(out.face_centroids())
     centre = np.einsum("ij,ij->i", fn, nin[ct])
     best = np.maximum(corner, centre)
+    for f in np.flatnonzero(best <= 0):
+        pts = np.vstack([out.points[out.faces[f, :3]], out.face_centroids()[f]])
+        best[f] = max(_best_equidistant_dot(Pn, tris, nin, x, fn[f], skin.diagonal) for x in pts)
     assert best.min() > -0.5
     assert (best <= 0).sum() <= 0.001 * out.n_faces
     if name != "straight_wing":
@@ -194,7 +213,10 @@ def test_edge_across_the_cessna_dorsal_fin_is_split(geometry_dir, manifest):
     rep = {}
     remesh_skin(st.surface, target, max_deviation=0.1 * target, locator=st.locator, report=rep)
     assert rep["n_standing_faces"] == 0
-    assert rep["deviation_edge_midpoints"] <= 1.25 * 0.1 * target
+    # 1.01-1.44 x max_deviation on the input and six copies perturbed by 1e-10 (the edges
+    # left over it are the guarantee's exceptions: short, or splitting them would make a
+    # sliver); the faces standing across the fin gave 3.1
+    assert rep["deviation_edge_midpoints"] <= 1.6 * 0.1 * target
 
 
 def test_remesh_is_deterministic(geometry_dir, manifest):

@@ -485,7 +485,8 @@ def test_warp_weight_flattens_quads_over_a_kink_and_keeps_them_on_the_surface():
     """smooth(warp_weight > 0): the corners of the quads folded over the roof's ridge slide along
     the roof's facets until the quads are flatter (on this grid the plain smoothing keeps the
     ridge quads folded by the full 24 degrees; with the term the worst quad without a fixed
-    corner has 14.0 degrees); every node stays on the input surface, no element falls below
+    corner has 13.4 degrees, and the sum of squared warps, which the term lowers, is 57 % of
+    the plain smoothing's); every node stays on the input surface, no element falls below
     min(its own, 0.3), and warp_weight 0 is the plain smoothing."""
     from shellmesh_mdao.quality import element_quality
     mesh, sup = _roof()
@@ -498,7 +499,8 @@ def test_warp_weight_flattens_quads_over_a_kink_and_keeps_them_on_the_surface():
     wp, wf = (element_quality(m.points, m.faces)["warp"] for m in (plain, flat))
     inner = ~(sup.kind[mesh.faces] == FIXED).any(1)                # quads free to move
     assert wp[inner].max() > 23.0 and wf[inner].max() < 0.65 * wp[inner].max()
-    assert wf.sum() < wp.sum()
+    assert (wf ** 2).sum() < 0.65 * (wp ** 2).sum()
+    assert wf[inner].sum() < 0.95 * wp[inner].sum()
     assert sup.distance(flat.points).max() <= 1e-9 * mesh.diagonal
     sj0 = scaled_jacobian(mesh.points, mesh.faces)
     assert (scaled_jacobian(flat.points, flat.faces) >= np.minimum(sj0, 0.3) - 1e-12).all()
