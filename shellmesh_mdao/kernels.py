@@ -10,7 +10,8 @@ remesh's time. Here the same result comes from one pass over the entries.
 The others replace whole-array formulas whose temporaries and per-call overhead cost more
 than the arithmetic: counting sorts for the stable argsorts of vertex ids, the smoothing's
 orthogonality Jacobian and gradient, the elements' corner scaled Jacobians, the closest
-points on curves and triangles, the per-row vector formulas of the remesh, the imprint and
+points on curves and triangles (and the bounding-volume hierarchy that finds the closest
+points on the input skin, :class:`TriangleBVH`), the per-row vector formulas of the remesh, the imprint and
 the smoother ("rows of three"), and the remesh's collapse and flip tests. Where numpy sums
 three products (einsum, row norms) the loops sum them in numpy's order. Angles stay with
 numpy: the loops hand back the arguments of its ``arctan2`` and ``arccos`` (on a machine

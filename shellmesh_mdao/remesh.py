@@ -1048,6 +1048,14 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
     # the new point must split the edge into two real parts (a projection landing on an
     # end point, e.g. across a thin region, would split forever)
     ok &= np.minimum(_norm(newP - P[a]), _norm(newP - P[b])) > 0.25 * L[sel]
+    # nor be carried onto the vertex across the edge by its projection (through a tip cap
+    # thinner than the edge it lands on the far side's vertex: a zero-length edge, two
+    # coincident nodes); a sliver whose far vertex lies near the edge's midpoint is split
+    mid_all = 0.5 * (P[a] + P[b])
+    for hh in (T.h0[sel], T.h1[sel]):
+        hv = np.maximum(hh, 0)
+        pc = P[W.F[hv // 3, (hv % 3 + 2) % 3]]
+        ok &= (hh < 0) | (_norm(newP - pc) > 0.25 * _norm(mid_all - pc))
     if forced is not None and min_angle_guard > 0:
         # forced (deviation) splits: none of the four new triangles may fall below
         # min(min_angle_guard, half the smallest angle of the triangle it replaces), unless

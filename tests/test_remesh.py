@@ -219,6 +219,23 @@ def test_edge_across_the_cessna_dorsal_fin_is_split(geometry_dir, manifest):
     assert rep["deviation_edge_midpoints"] <= 1.6 * 0.1 * target
 
 
+def test_deviation_split_does_not_land_on_the_vertex_across(geometry_dir, manifest):
+    """straight_wing at target 0.08 with its coordinates multiplied by 1 + 1e-10 g (seed 0): a
+    deviation split across the round tip cap (thinner than the edge) had its midpoint projected
+    onto the vertex across the edge, leaving two nodes 1e-11 apart (a triangle with a 0-degree
+    angle; after the whole pipeline at size 0.04, an element of scaled Jacobian 0.18 and 7 skin
+    nodes off the surface). A split whose projection carries the new point onto the vertex
+    across the edge is not made: no edge is shorter than a twentieth of min_edge."""
+    skin = load_surface(geometry_dir / manifest["geometries"]["straight_wing"]["file"])[0]
+    P = skin.points * (1 + 1e-10 * np.random.default_rng(0).standard_normal(skin.points.shape))
+    skin = ShellMesh(P, skin.faces, skin.component, list(skin.component_names))
+    rep = {}
+    out = remesh_skin(skin, 0.08, report=rep)
+    assert out.edge_lengths().min() > 0.05 * rep["min_edge"]
+    assert _angles(out.points, out.faces[:, :3]).min() > 1.0
+    assert out.check().ok, out.check().problems()
+
+
 def test_remesh_is_deterministic(geometry_dir, manifest):
     skin, _ = load_surface(geometry_dir / manifest["geometries"]["straight_wing"]["file"])
     a = remesh_skin(skin, 0.08)
