@@ -79,14 +79,15 @@ def closest_on_polyline(q: np.ndarray, poly: np.ndarray, closed: bool = False) -
     return _closest_on_segments(q, p[:-1], p[1:])[0]
 
 
-def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs) -> np.ndarray:
+def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs, params: bool = False):
     """Closest point of each query ``q[i]`` on the arc ``arcs[cid[i]]``: the same points, bit
     for bit, as :func:`closest_on_polyline` arc by arc, in one query. The segment midpoints
     of all arcs go in one KD-tree with the arc's index times a separation far larger than
     the model as a fourth coordinate, so a query meets only its own arc's segments (at their
     plain distance); its candidates lie within the nearest midpoint's distance plus half its
     arc's longest segment, as in :func:`_closest_on_segments`, and the nearest candidate wins
-    (ties: the lowest segment)."""
+    (ties: the lowest segment). ``params``: also return each point's arc length from its
+    arc's first point."""
     q = np.asarray(q, float).reshape(-1, 3)
     cid = np.asarray(cid, np.int64)
     ids = np.unique(cid)
@@ -112,7 +113,12 @@ def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs) -> np.ndarray:
     qi = np.repeat(np.arange(len(q)), cnt)
     si = np.concatenate([np.asarray(c, np.int64) for c in cand])
     keep = seg_arc[si] == qa[qi]
-    return _pick_segments(q, qi[keep], si[keep], a, ab)[0]
+    x, _, seg, t = _pick_segments(q, qi[keep], si[keep], a, ab)
+    if not params:
+        return x
+    cum = np.concatenate([[0.0], np.cumsum(L)])
+    first = np.concatenate([[0], np.cumsum(nseg)[:-1]])
+    return x, cum[seg] - cum[first[seg_arc[seg]]] + t * L[seg]
 
 
 def _tri_angles_min(P, T):
@@ -359,8 +365,62 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     old = chain_v < n0
     mov = chain_v[~old | ~on_plane[np.minimum(chain_v, n0 - 1)]]
     if len(mov):
-        P[mov] = closest_on_polyline(P[mov], arc.points, arc.closed)
+        before = P[mov]
+        P[mov] = closest_on_polyline(before, arc.points, arc.closed)
+        _unfold_on_arc(P, chain_v, mov, before, arc)
     return P, T2, C2, chain_v, (uedges, new_id)
+
+
+def _unfold_on_arc(P, chain_v, mov, before, arc, passes: int = 3) -> int:
+    """Keep the chain's order along its arc. Where the skin is thinner than its faces (a
+    trailing edge at a wing tip, at a coarse size) the closest arc point of a chain vertex can
+    lie on the far side of the section: the chain then runs back along the arc and forth again
+    (a spike, a corner of almost 0 degrees in the member's outline). Such a vertex (``mov``,
+    positions ``before`` its projection) whose neighbours along the chain are in order goes to
+    its closest point on the piece of the arc between them instead. Updates ``P`` in place;
+    returns the number of vertices moved."""
+    from .members import _arc_param, _sub_polyline
+
+    chain_v = np.asarray(chain_v, np.int64)
+    k = len(chain_v)
+    if k < 3:
+        return 0
+    orig = dict(zip(np.asarray(mov, np.int64).tolist(), np.asarray(before)))
+    closed = bool(arc.closed) and k >= 4
+    moved = 0
+    for _ in range(passes):
+        s, poly, cum = _arc_param(P[chain_v], arc.points, arc.closed)
+        Ltot = float(cum[-1])
+        d = np.diff(np.concatenate([s, s[:1]]) if closed else s)
+        if arc.closed:
+            d = d - Ltot * np.round(d / Ltot)
+        sgn = 1.0 if d.sum() >= 0 else -1.0
+        back = d * sgn <= 0                                  # step i -> i + 1 runs back along the arc
+        idx = np.arange(k) if closed else np.arange(1, k - 1)
+        prev_back = back[(idx - 1) % len(back)]
+        next_back = back[idx % len(back)] if closed else back[idx]
+        span = (s[(idx + 1) % k] - s[(idx - 1) % k]) * sgn
+        if arc.closed:
+            span = span - Ltot * np.floor(span / Ltot)
+        fold = (prev_back | next_back) & (span > 0) & np.isin(chain_v[idx], mov)
+        if not fold.any():
+            break
+        # one vertex of each run of folded neighbours per pass (its neighbours must be in order)
+        cand = idx[fold]
+        cand = cand[~np.isin(cand - 1, cand)] if not closed else cand[:1]
+        for i in cand.tolist():
+            a, b = s[(i - 1) % k], s[(i + 1) % k]
+            lo, hi = (a, b) if sgn > 0 else (b, a)
+            if arc.closed and hi < lo:                       # the piece wraps past the arc's start
+                piece = np.vstack([_sub_polyline(poly, cum, lo, Ltot), _sub_polyline(poly, cum, 0.0, hi)[1:]])
+            elif hi > lo:
+                piece = _sub_polyline(poly, cum, lo, hi)
+            else:
+                continue
+            v = int(chain_v[i])
+            P[v] = closest_on_polyline(orig[v][None], piece, False)[0]
+            moved += 1
+    return moved
 
 
 def _chain_from_labels(T, label, name):
@@ -1303,12 +1363,15 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0, active=None
     return T, len(take)
 
 
-def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
+def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, chain_nb=None):
     """Move each movable vertex towards the area-weighted centroid of its star (tangential,
-    then onto the input surface); chain vertices (``chain_of[v] >= 0``) move towards the
-    midpoint of their chain neighbours, projected onto their exact arc. A move is kept only
-    if it raises the smallest angle of the vertex's star and flips no triangle; moves are
-    applied on an independent set (no two moved vertices share a triangle)."""
+    then onto the input surface); chain vertices (``chain_of[v] >= 0``) move the same way,
+    projected onto their exact arc. A move is kept only if it raises the smallest angle of
+    the vertex's star and flips no triangle, and (``chain_nb``: each vertex's previous and
+    next vertex along its chain, -1 for none) keeps the vertex between its chain neighbours
+    along the arc: where the skin is thinner than its faces the closest arc point can be on
+    the far side of the section, and the chain would run back and forth there (a spike).
+    Moves are applied on an independent set (no two moved vertices share a triangle)."""
     n = len(P)
     ptr, star = vertex_faces(T, n)
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
@@ -1341,6 +1404,23 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
         vv = cand[chain_of[cand] >= 0]
         if len(vv):
             new[vv] = _closest_on_arcs(new[vv], chain_of[vv], arcs)
+            if chain_nb is not None:
+                # the new point must stay between its chain neighbours along the arc
+                pv, nx = chain_nb[0][vv], chain_nb[1][vv]
+                has = np.flatnonzero((pv >= 0) & (nx >= 0))
+                if len(has):
+                    c3 = np.tile(chain_of[vv[has]], 3)
+                    _, sp = _closest_on_arcs(np.vstack([new[vv[has]], P[pv[has]], P[nx[has]]]), c3, arcs,
+                                             params=True)
+                    sv, sa, sb = sp.reshape(3, -1)
+                    d1, d2 = sv - sa, sb - sv
+                    closed = np.array([arcs[c].closed for c in chain_of[vv[has]]], bool)
+                    if closed.any():
+                        Ltot = np.array([_arc_length(arcs[c]) for c in chain_of[vv[has]]])
+                        d1 = np.where(closed, d1 - Ltot * np.round(d1 / np.where(closed, Ltot, 1.0)), d1)
+                        d2 = np.where(closed, d2 - Ltot * np.round(d2 / np.where(closed, Ltot, 1.0)), d2)
+                    back = vv[has[d1 * d2 <= 0]]
+                    new[back] = P[back]                   # no move: the star check drops it
     # evaluate each vertex's star with only that vertex moved
     Tm = T[tris]
     which = Tm == rows[:, None]
@@ -1382,6 +1462,27 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5):
     P = P.copy()
     P[take] = new[take]
     return P, len(take)
+
+
+def _arc_length(arc) -> float:
+    """Length of an arc's polyline (closed arcs: with the closing segment)."""
+    p = np.vstack([arc.points, arc.points[:1]]) if arc.closed else arc.points
+    return float(norm_rows(np.diff(p, axis=0), axis=1).sum())
+
+
+def _chain_neighbours(n, chain_vs, arcs):
+    """(previous, next) vertex of every vertex along its chain (-1 for none; closed arcs wrap)."""
+    prev = np.full(n, -1, np.int64)
+    nxt = np.full(n, -1, np.int64)
+    for vs, arc in zip(chain_vs, arcs):
+        if len(vs) < 2:
+            continue
+        prev[vs[1:]] = vs[:-1]
+        nxt[vs[:-1]] = vs[1:]
+        if arc is not None and arc.closed and len(vs) >= 3:
+            prev[vs[0]] = vs[-1]
+            nxt[vs[-1]] = vs[0]
+    return prev, nxt
 
 
 def _ranges(starts, stops):
@@ -1459,10 +1560,11 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
             if r > 0:
                 active[T[_face_rings(T, ptr, vf, seed, r)]] = True
         movable &= active
+    chain_nb = _chain_neighbours(len(P), chain_vs, arcs)
     with np.errstate(invalid="ignore"):
         for _ in range(rounds):
             T, nf = _flip_round(P, T, fe, min_gain=min_gain, active=active)
-            P, nm = _smooth_round(P, T, movable, locator, chain_of, arcs)
+            P, nm = _smooth_round(P, T, movable, locator, chain_of, arcs, chain_nb=chain_nb)
             if nf == 0 and nm == 0:
                 break
     C = mesh.component

@@ -199,6 +199,20 @@ def test_cessna_one_spar_seed89_end_to_end(geometry_dir, manifest):
 
 
 @pytest.mark.slow
+def test_cessna_rib_at_the_tip_keeps_its_trailing_edge_corner(geometry_dir, manifest):
+    """Stress seed 157 (6 ribs from eta 0 to 1, one spar at 0.077, size 0.578): the full-chord rib
+    at eta 1.0 lies where the trailing edge is thinner than the skin faces. The closest points of
+    two of its chain vertices on the exact section were on the far side of it (once in the cut,
+    then in the smoothing rounds of improve_skin), so its outline ran back along the lower skin
+    and forth again: a 0.2-degree corner, refused as a sharp edge of the skin while the section's
+    trailing-edge wedge is 14.3 degrees. Chain vertices now keep their order along the arc: the
+    outline keeps the 14.3-degree corner and every guarantee holds."""
+    c, res = _run_draw(geometry_dir, manifest, 157, "cessna210")
+    assert len(c["spars"]) == 1 and 1.0 in c["ribs"]
+    check_guarantees(res)
+
+
+@pytest.mark.slow
 def test_quad_stage_repairs_a_poor_element(geometry_dir, manifest, monkeypatch):
     """The quad stage's last resort. No run of the corpus leaves a poor element for it now (with
     smooth_energy='squared', 2 final steps and the imprint's snap at 0.25 stress seed 89 had one at
