@@ -1404,23 +1404,6 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
         vv = cand[chain_of[cand] >= 0]
         if len(vv):
             new[vv] = _closest_on_arcs(new[vv], chain_of[vv], arcs)
-            if chain_nb is not None:
-                # the new point must stay between its chain neighbours along the arc
-                pv, nx = chain_nb[0][vv], chain_nb[1][vv]
-                has = np.flatnonzero((pv >= 0) & (nx >= 0))
-                if len(has):
-                    c3 = np.tile(chain_of[vv[has]], 3)
-                    _, sp = _closest_on_arcs(np.vstack([new[vv[has]], P[pv[has]], P[nx[has]]]), c3, arcs,
-                                             params=True)
-                    sv, sa, sb = sp.reshape(3, -1)
-                    d1, d2 = sv - sa, sb - sv
-                    closed = np.array([arcs[c].closed for c in chain_of[vv[has]]], bool)
-                    if closed.any():
-                        Ltot = np.array([_arc_length(arcs[c]) for c in chain_of[vv[has]]])
-                        d1 = np.where(closed, d1 - Ltot * np.round(d1 / np.where(closed, Ltot, 1.0)), d1)
-                        d2 = np.where(closed, d2 - Ltot * np.round(d2 / np.where(closed, Ltot, 1.0)), d2)
-                    back = vv[has[d1 * d2 <= 0]]
-                    new[back] = P[back]                   # no move: the star check drops it
     # evaluate each vertex's star with only that vertex moved
     Tm = T[tris]
     which = Tm == rows[:, None]
@@ -1437,6 +1420,8 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     np.minimum.at(worst_new, rows, np.where(flip, -1.0, ang_new))
     np.minimum.at(worst_old, rows, ang_old)
     ok = cand[worst_new[cand] > worst_old[cand] + 1e-9]
+    if chain_nb is not None and chain_of is not None and len(ok):
+        ok = ok[_in_order_on_arc(ok, new, P, chain_of, chain_nb, arcs)]
     if not len(ok):
         return P, 0
     # independent set: vertices sharing a triangle cannot both move (lowest-index wins)
@@ -1462,6 +1447,29 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     P = P.copy()
     P[take] = new[take]
     return P, len(take)
+
+
+def _in_order_on_arc(v, new, P, chain_of, chain_nb, arcs) -> np.ndarray:
+    """(len(v),) bool: False for a chain vertex of ``v`` whose position ``new`` (on its arc) is not
+    between its chain neighbours' (``chain_nb``: previous and next along the chain, -1 for
+    none) along the arc; True for every other vertex. The arc positions come from one query
+    (each point answered on its own)."""
+    keep = np.ones(len(v), bool)
+    pv, nx = chain_nb[0][v], chain_nb[1][v]
+    has = np.flatnonzero((chain_of[v] >= 0) & (pv >= 0) & (nx >= 0))
+    if not len(has):
+        return keep
+    c = chain_of[v[has]]
+    _, sp = _closest_on_arcs(np.vstack([new[v[has]], P[pv[has]], P[nx[has]]]), np.tile(c, 3), arcs, params=True)
+    sv, sa, sb = sp.reshape(3, -1)
+    d1, d2 = sv - sa, sb - sv
+    closed = np.array([a.closed for a in arcs], bool)[c]
+    if closed.any():
+        Ltot = np.array([_arc_length(a) if a.closed else 1.0 for a in arcs])[c]
+        d1 = np.where(closed, d1 - Ltot * np.round(d1 / Ltot), d1)
+        d2 = np.where(closed, d2 - Ltot * np.round(d2 / Ltot), d2)
+    keep[has] = d1 * d2 > 0
+    return keep
 
 
 def _arc_length(arc) -> float:
