@@ -379,8 +379,6 @@ def _unfold_on_arc(P, chain_v, mov, before, arc, passes: int = 3) -> int:
     positions ``before`` its projection) whose neighbours along the chain are in order goes to
     its closest point on the piece of the arc between them instead. Updates ``P`` in place;
     returns the number of vertices moved."""
-    from .members import _arc_param, _sub_polyline
-
     chain_v = np.asarray(chain_v, np.int64)
     k = len(chain_v)
     if k < 3:
@@ -459,6 +457,31 @@ def _chain_from_labels(T, label, name):
     start = int(ends.min()) if len(ends) else int(verts.min())
     order = depth_first_order(g, start, directed=False, return_predecessors=False)
     return order.astype(np.int64)
+
+
+def _arc_param(q: np.ndarray, poly: np.ndarray, closed: bool):
+    """Arc-length parameter of the closest point on a polyline to each query point, and the
+    polyline's cumulative lengths (:func:`_closest_on_segments`)."""
+    p = np.vstack([poly, poly[:1]]) if closed else poly
+    L = norm_rows(p[1:] - p[:-1], axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(L)])
+    _, _, seg, t = _closest_on_segments(q, p[:-1], p[1:], full=True)
+    return cum[seg] + t * L[seg], p, cum
+
+
+def _arc_point(p: np.ndarray, cum: np.ndarray, s: np.ndarray) -> np.ndarray:
+    s = np.clip(s, 0.0, cum[-1])
+    i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2)
+    seg = np.maximum(cum[i + 1] - cum[i], 1e-300)
+    t = np.clip((s - cum[i]) / seg, 0.0, 1.0)
+    return p[i] + t[:, None] * (p[i + 1] - p[i])
+
+
+def _sub_polyline(p: np.ndarray, cum: np.ndarray, s0: float, s1: float) -> np.ndarray:
+    """The piece of a polyline (points ``p``, cumulative lengths ``cum``) between parameters
+    ``s0 < s1``."""
+    inner = (cum > s0) & (cum < s1)
+    return np.vstack([_arc_point(p, cum, np.array([s0])), p[inner], _arc_point(p, cum, np.array([s1]))])
 
 
 def _polyline_param(q, poly, cum):
@@ -1465,17 +1488,11 @@ def _in_order_on_arc(v, new, P, chain_of, chain_nb, arcs) -> np.ndarray:
     d1, d2 = sv - sa, sb - sv
     closed = np.array([a.closed for a in arcs], bool)[c]
     if closed.any():
-        Ltot = np.array([_arc_length(a) if a.closed else 1.0 for a in arcs])[c]
+        Ltot = np.array([a.length if a.closed else 1.0 for a in arcs])[c]
         d1 = np.where(closed, d1 - Ltot * np.round(d1 / Ltot), d1)
         d2 = np.where(closed, d2 - Ltot * np.round(d2 / Ltot), d2)
     keep[has] = d1 * d2 > 0
     return keep
-
-
-def _arc_length(arc) -> float:
-    """Length of an arc's polyline (closed arcs: with the closing segment)."""
-    p = np.vstack([arc.points, arc.points[:1]]) if arc.closed else arc.points
-    return float(norm_rows(np.diff(p, axis=0), axis=1).sum())
 
 
 def _chain_neighbours(n, chain_vs, arcs):
@@ -1487,7 +1504,7 @@ def _chain_neighbours(n, chain_vs, arcs):
             continue
         prev[vs[1:]] = vs[:-1]
         nxt[vs[:-1]] = vs[1:]
-        if arc is not None and arc.closed and len(vs) >= 3:
+        if arc.closed and len(vs) >= 3:
             prev[vs[0]] = vs[-1]
             nxt[vs[-1]] = vs[0]
     return prev, nxt

@@ -922,6 +922,36 @@ def _bvh_closest(Q, lo, hi, V, TB, tri_id, NB, child, start, cnt, slack, out, oi
         oid[i] = bid
 
 
+class _Background:
+    """``fn(*args)`` in a thread of its own from now on; :meth:`result` waits for its value (or
+    raises its exception). For work that releases the GIL (a KD-tree query, a compiled
+    ``nogil`` loop) beside work in the caller's thread; the value is the same as a call in the
+    caller's. One short-lived thread per call rather than a shared ``concurrent.futures``
+    pool: a pool's idle worker does not survive a ``fork`` (a study's multiprocessing pool),
+    and the child's ``submit`` would wait for it forever. (Used by the smoothing's trust
+    radius and :meth:`TriangleBVH.closest`.)"""
+
+    def __init__(self, fn, *args):
+        self._out: list = []
+
+        def run():
+            try:
+                self._out.append((True, fn(*args)))
+            except BaseException as exc:          # handed to the caller by result()
+                self._out.append((False, exc))
+
+        import threading
+        self._thread = threading.Thread(target=run, daemon=True)
+        self._thread.start()
+
+    def result(self):
+        self._thread.join()
+        ok, value = self._out[0]
+        if not ok:
+            raise value
+        return value
+
+
 class TriangleBVH:
     """Exact closest points on a fixed set of triangles (float64), for many query points.
 
@@ -968,30 +998,11 @@ class TriangleBVH:
         args = (self._V, self._TB, self._tri_id, self._box, self._child, self._start, self._cnt, self._slack,
                 out, oid)
         nt = max(1, min(int(threads), k // 2048))
-        if nt == 1:
-            _bvh_closest(q, 0, k, *args)
-            return out, oid
-        import threading
         cuts = np.linspace(0, k, nt + 1).astype(np.int64)
-        errors = []
-
-        def run(a, b):
-            try:
-                _bvh_closest(q, a, b, *args)
-            except BaseException as exc:                # re-raised in the caller's thread
-                errors.append(exc)
-
-        # short-lived threads rather than a pool: a pool's idle worker does not survive a
-        # fork (a study's multiprocessing pool)
-        workers = [threading.Thread(target=run, args=(int(cuts[j]), int(cuts[j + 1])), daemon=True)
-                   for j in range(1, nt)]
+        workers = [_Background(_bvh_closest, q, int(cuts[j]), int(cuts[j + 1]), *args) for j in range(1, nt)]
+        _bvh_closest(q, int(cuts[0]), int(cuts[1]), *args)
         for w in workers:
-            w.start()
-        run(int(cuts[0]), int(cuts[1]))
-        for w in workers:
-            w.join()
-        if errors:
-            raise errors[0]
+            w.result()
         return out, oid
 
 

@@ -49,7 +49,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError, LayoutError, SizeError
-from .imprint import _closest_on_segments
+from .imprint import _arc_param, _arc_point, _closest_on_segments, _sub_polyline
 from .mesh import ShellMesh, vertex_faces, norm_rows
 from .section import Plane
 
@@ -986,31 +986,6 @@ def _plane_frame(m: _Member, P: np.ndarray, nodes: np.ndarray):
 
 
 # ============================================================================ chain spacing
-def _arc_param(q: np.ndarray, poly: np.ndarray, closed: bool):
-    """Arc-length parameter of the closest point on a polyline to each query point, and the
-    polyline's cumulative lengths (:func:`~shellmesh_mdao.imprint._closest_on_segments`)."""
-    p = np.vstack([poly, poly[:1]]) if closed else poly
-    L = norm_rows(p[1:] - p[:-1], axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(L)])
-    _, _, seg, t = _closest_on_segments(q, p[:-1], p[1:], full=True)
-    return cum[seg] + t * L[seg], p, cum
-
-
-def _arc_point(p: np.ndarray, cum: np.ndarray, s: np.ndarray) -> np.ndarray:
-    s = np.clip(s, 0.0, cum[-1])
-    i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2)
-    seg = np.maximum(cum[i + 1] - cum[i], 1e-300)
-    t = np.clip((s - cum[i]) / seg, 0.0, 1.0)
-    return p[i] + t[:, None] * (p[i + 1] - p[i])
-
-
-def _sub_polyline(p: np.ndarray, cum: np.ndarray, s0: float, s1: float) -> np.ndarray:
-    """The piece of a polyline (points ``p``, cumulative lengths ``cum``) between parameters
-    ``s0 < s1``."""
-    inner = (cum > s0) & (cum < s1)
-    return np.vstack([_arc_point(p, cum, np.array([s0])), p[inner], _arc_point(p, cum, np.array([s1]))])
-
-
 def _relax_chains(skin: ShellMesh, P: np.ndarray, mems, chains_arcs, ratio: float = 0.67, rounds: int = 20,
                   min_skin_angle: float = 10.0, pinned=None) -> int:
     """Even out uneven chain spacing by sliding chain vertices along their exact arcs.

@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import threading
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -64,7 +63,7 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import closest_on_curves, face_quality, min_corner_sj, ortho_gradient, ortho_jacobian
+from .kernels import _Background, closest_on_curves, face_quality, min_corner_sj, ortho_gradient, ortho_jacobian
 from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -904,37 +903,9 @@ def _face_rings(faces, ptr, vf, verts, rings: int = 2):
 
 def _nearest_other(P, verts):
     """Distance from each of ``verts`` to the nearest other vertex of ``P`` (one thread: it runs
-    beside the smoothing's own work, see :class:`_Background`)."""
+    beside the smoothing's own work, see :class:`~shellmesh_mdao.kernels._Background`)."""
     dn, _ = cKDTree(P, balanced_tree=False, compact_nodes=False).query(P[verts], k=2, workers=1)
     return dn[:, 1]
-
-
-class _Background:
-    """``fn(*args)`` in a thread of its own from now on; :meth:`result` waits for its value (or
-    raises its exception). For work that releases the GIL (a KD-tree query) beside numpy and
-    SuperLU work in the caller's thread; the value is the same as a call in the caller's. One
-    short-lived thread per call rather than a shared ``concurrent.futures`` pool: a pool's idle
-    worker does not survive a ``fork`` (a study's multiprocessing pool), and the child's
-    ``submit`` would wait for it forever."""
-
-    def __init__(self, fn, *args):
-        self._out: list = []
-
-        def run():
-            try:
-                self._out.append((True, fn(*args)))
-            except BaseException as exc:          # handed to the caller by result()
-                self._out.append((False, exc))
-
-        self._thread = threading.Thread(target=run, daemon=True)
-        self._thread.start()
-
-    def result(self):
-        self._thread.join()
-        ok, value = self._out[0]
-        if not ok:
-            raise value
-        return value
 
 
 class _Linear:
