@@ -22,6 +22,7 @@ setup(
         "rtree>=1.0",
         "pyvista>=0.43",
         "highspy>=1.7",
+        "qdldl>=0.1.9",
         "meshio>=5.3",
         "pyNastran>=1.4",
         "pyyaml>=6.0",

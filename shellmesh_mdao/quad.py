@@ -30,8 +30,8 @@ falling back to the guarded positions only where that repair fails.
 from __future__ import annotations
 
 import numpy as np
+import qdldl
 from scipy import sparse
-from scipy.sparse import linalg as spla
 
 from .errors import MeshValidationError
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
@@ -325,17 +325,53 @@ def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6
 _TWIST = np.array([1.0, -1.0, 1.0, -1.0])
 
 
-def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50, start=None):
+class _LDL:
+    """Sparse LDL^T factorisations (qdldl: AMD ordering, no pivoting) of symmetric positive
+    definite matrices that share one sparsity pattern: the ordering and the symbolic
+    factorisation are made for the first matrix and kept while the pattern repeats, only
+    the numeric factorisation is redone. Same matrix, same bits."""
+
+    def __init__(self):
+        self.pattern = None
+        self.solver = None
+
+    def factor(self, indptr, indices, data):
+        """Factorise the matrix whose UPPER triangle is the CSC ``(data, indices, indptr)``."""
+        n = len(indptr) - 1
+        U = sparse.csc_matrix((data, indices, indptr), shape=(n, n))
+        if (self.pattern is not None and np.array_equal(self.pattern[0], indptr)
+                and np.array_equal(self.pattern[1], indices)):
+            self.solver.update(U, upper=True)
+        else:
+            self.solver = qdldl.Solver(U, upper=True)
+            self.pattern = (indptr.copy(), indices.copy())
+        return self.solver
+
+
+def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50, start=None, ldl: _LDL | None = None):
     """``t`` minimising ``|A t - b|^2 + sum(reg t^2)`` with ``|t| <= bound``: the primal-dual
     active-set method for box-constrained QPs (Hintermueller, Ito and Kunisch, SIAM J. Optim.
-    13, 2003), one sparse LU solve of the free unknowns per round, until the active sets repeat
-    (at most ``max_rounds`` rounds; the result is clipped to the box either way). ``start``:
-    ``(x, lam)`` of a neighbouring problem, whose active sets are the first guess (default
-    zeros: every unknown free). Returns ``(t, lam)``, ``lam`` the bounds' multipliers."""
-    N = (A.T @ A + sparse.diags(reg)).tocsr()
+    13, 2003), until the active sets repeat (at most ``max_rounds`` rounds; the result is
+    clipped to the box either way). Each round solves for the free unknowns with the bound
+    ones held: the normal matrix with the held unknowns' rows and columns replaced by the
+    identity's, whose pattern is the same every round, so one :class:`_LDL` (``ldl``, reused
+    by the caller across problems of one pattern) orders it once and refactorises it
+    numerically per round. ``start``: ``(x, lam)`` of a neighbouring problem, whose active
+    sets are the first guess (default zeros: every unknown free). Returns ``(t, lam)``,
+    ``lam`` the bounds' multipliers."""
+    N = (A.T @ A + sparse.diags(reg)).tocsc()
+    N.sort_indices()
+    n = N.shape[0]
     r = A.T @ b
     c = N.diagonal()
-    x, lam = (np.zeros(A.shape[1]), np.zeros(A.shape[1])) if start is None else (start[0].copy(), start[1].copy())
+    rows = N.indices
+    cols = np.repeat(np.arange(n), np.diff(N.indptr))
+    up_tri = rows <= cols
+    ur, uc, ud = rows[up_tri], cols[up_tri], N.data[up_tri]
+    uptr = np.concatenate([[0], np.cumsum(np.bincount(uc, minlength=n))]).astype(N.indptr.dtype)
+    eye = np.where(ur == uc, 1.0, 0.0)
+    ldl = _LDL() if ldl is None else ldl
+    x, lam = (np.zeros(n), np.zeros(n)) if start is None else (start[0].copy(), start[1].copy())
     sets = None
     for _ in range(max_rounds):
         up = lam + c * (x - bound) > 0
@@ -345,10 +381,8 @@ def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50, start=None):
         sets = (up, lo)
         free = ~(up | lo)
         x = np.where(up, bound, np.where(lo, -bound, 0.0))
-        fi = np.flatnonzero(free)
-        if len(fi):
-            Nf = N[fi]
-            x[fi] = spla.spsolve(Nf[:, fi].tocsc(), r[fi] - Nf[:, ~free] @ x[~free])
+        solver = ldl.factor(uptr, ur, np.where(free[ur] & free[uc], ud, eye))
+        x = solver.solve(np.where(free, r - N @ x, x))
         lam = r - N @ x
         lam[free] = 0.0
     return np.clip(x, -bound, bound), lam
@@ -452,6 +486,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     D = 0.5 * (norm_rows(P[Q[:, 2]] - P[Q[:, 0]], axis=1) + norm_rows(P[Q[:, 3]] - P[Q[:, 1]], axis=1))
     t = np.zeros(len(cand))
     start = None
+    ldl = _LDL()                     # every round's normal matrix has the same pattern
     for _ in range(int(iterations)):
         X = P.copy()
         X[cand] += t[:, None] * nu
@@ -468,7 +503,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
             # the quads already flatter than aim only hold on, the moves go where warp is
             wc = element_quality(X, Q)["warp"]
             b = b + (A @ t - b) * np.minimum(1.0, aim / np.maximum(wc, 1e-12))
-        t, lam = _bounded_least_squares(A, b, regularisation / h ** 2, bound, start=start)
+        t, lam = _bounded_least_squares(A, b, regularisation / h ** 2, bound, start=start, ldl=ldl)
         start = (t, lam)             # the next round's problem is this one re-linearised
     t[np.abs(t) <= 1e-9 * bound] = 0.0            # round-off of the solve: those nodes stay on the input
     # guard: no element at or below guard_jacobian worse, none above falls to it, none turns over
