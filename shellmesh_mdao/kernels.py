@@ -9,7 +9,7 @@ remesh's time. Here the same result comes from one pass over the entries.
 
 The others replace whole-array formulas whose temporaries and per-call overhead cost more
 than the arithmetic: counting sorts for the stable argsorts of vertex ids, the smoothing's
-orthogonality Jacobian and gradient, the elements' corner scaled Jacobians, the closest
+orthogonality Jacobian and gradient and its reduced Hessian, the elements' corner scaled Jacobians, the closest
 points on curves and triangles (and the bounding-volume hierarchy that finds the closest
 points on the input skin, :class:`TriangleBVH`), the per-row vector formulas of the remesh, the imprint and
 the smoother ("rows of three"), and the remesh's collapse and flip tests. Where numpy sums
@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
+           "ortho_gradient", "ReducedHessian", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
            "stable_pair_order", "edge_table", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -427,6 +427,304 @@ def ortho_gradient(a, b, c, n, su, sv, w, x, nv):
         raise ValueError(f"x must hold the nv = {nv} positions")
     a, b, c, n, su, sv, w = _corners(a, b, c, n, su, sv, w, nv)
     return _ortho_gradient(a, b, c, n, su, sv, w, x, nv)
+
+
+# ============================================================================ smoothing Hessian
+@njit(cache=True, nogil=True)
+def _hessian_pattern(pu, pv, quads, ncol, col_start):
+    n = ncol.shape[0]
+    cnt = np.zeros(n + 1, np.int64)
+    for v in range(n):
+        if ncol[v] > 0:
+            cnt[v + 1] += 1
+    for e in range(pu.shape[0]):
+        u, v = pu[e], pv[e]
+        if u != v and ncol[u] > 0 and ncol[v] > 0:
+            cnt[u + 1] += 1
+            cnt[v + 1] += 1
+    for q in range(quads.shape[0]):
+        for i in range(4):
+            u = quads[q, i]
+            if ncol[u] > 0:
+                for j in range(4):
+                    v = quads[q, j]
+                    if v != u and ncol[v] > 0:
+                        cnt[u + 1] += 1
+    ptr = np.cumsum(cnt)
+    adj = np.empty(ptr[n], np.int64)
+    fill = ptr[:n].copy()
+    for v in range(n):
+        if ncol[v] > 0:
+            adj[fill[v]] = v
+            fill[v] += 1
+    for e in range(pu.shape[0]):
+        u, v = pu[e], pv[e]
+        if u != v and ncol[u] > 0 and ncol[v] > 0:
+            adj[fill[u]] = v
+            fill[u] += 1
+            adj[fill[v]] = u
+            fill[v] += 1
+    for q in range(quads.shape[0]):
+        for i in range(4):
+            u = quads[q, i]
+            if ncol[u] > 0:
+                for j in range(4):
+                    v = quads[q, j]
+                    if v != u and ncol[v] > 0:
+                        adj[fill[u]] = v
+                        fill[u] += 1
+    # each row sorted, repeats dropped
+    vptr = np.zeros(n + 1, np.int64)
+    vadj = np.empty(ptr[n], np.int64)
+    m = 0
+    for u in range(n):
+        row = np.sort(adj[ptr[u]:ptr[u + 1]])
+        for t in range(row.shape[0]):
+            if t == 0 or row[t] != row[t - 1]:
+                vadj[m] = row[t]
+                m += 1
+        vptr[u + 1] = m
+    vadj = vadj[:m]
+    # each neighbour's first column within the row, and the reduced rows
+    aoff = np.empty(m, np.int64)
+    k = 0
+    for u in range(n):
+        k += ncol[u]
+    indptr = np.zeros(k + 1, np.int64)
+    for u in range(n):
+        w = 0
+        for e in range(vptr[u], vptr[u + 1]):
+            aoff[e] = w
+            w += ncol[vadj[e]]
+        for c in range(ncol[u]):
+            r = col_start[u] + c
+            indptr[r + 1] = w
+    for r in range(k):
+        indptr[r + 1] += indptr[r]
+    indices = np.empty(indptr[k], np.int64)
+    for u in range(n):
+        for c in range(ncol[u]):
+            p = indptr[col_start[u] + c]
+            for e in range(vptr[u], vptr[u + 1]):
+                v = vadj[e]
+                for cv in range(ncol[v]):
+                    indices[p] = col_start[v] + cv
+                    p += 1
+    return vptr, vadj, aoff, indptr, indices
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _slot(vptr, vadj, u, v):
+    """Position of ``v`` in ``u``'s sorted adjacency row (``v`` must be there)."""
+    lo, hi = vptr[u], vptr[u + 1]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if vadj[mid] <= v:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True)
+def _hessian_slots(vptr, vadj, pu, pv, quads, ncol):
+    """Adjacency positions of each pair (``u`` -> ``v``, ``v`` -> ``u``), of each vertex to
+    itself and of each quad's 16 corner couples (-1 where a vertex has no columns)."""
+    n = ncol.shape[0]
+    dslot = np.full(n, -1, np.int64)
+    for u in range(n):
+        if ncol[u] > 0:
+            dslot[u] = _slot(vptr, vadj, u, u)
+    pslot = np.full((pu.shape[0], 2), -1, np.int64)
+    for e in range(pu.shape[0]):
+        u, v = pu[e], pv[e]
+        if u != v and ncol[u] > 0 and ncol[v] > 0:
+            pslot[e, 0] = _slot(vptr, vadj, u, v)
+            pslot[e, 1] = _slot(vptr, vadj, v, u)
+    qslot = np.full((quads.shape[0], 4, 4), -1, np.int64)
+    for q in range(quads.shape[0]):
+        for i in range(4):
+            u = quads[q, i]
+            if ncol[u] > 0:
+                for j in range(4):
+                    v = quads[q, j]
+                    if ncol[v] > 0:
+                        qslot[q, i, j] = _slot(vptr, vadj, u, v)
+    return dslot, pslot, qslot
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _scatter(data, indptr, aoff, col_start, ncol, u, v, e, B, bu, bv, f):
+    """data[rows of u, columns of v] += f * B[bu + cu, bv + cv] (``e`` the position of ``v``
+    in ``u``'s adjacency row)."""
+    for cu in range(ncol[u]):
+        base = indptr[col_start[u] + cu] + aoff[e]
+        for cv in range(ncol[v]):
+            data[base + cv] += f * B[bu + cu, bv + cv]
+
+
+@njit(cache=True, nogil=True)
+def _hessian_values(indptr, aoff, dslot, pslot, qslot, col_start, ncol, tv, pu, pv, pw, quads, on, osu, osv, osw,
+                    fo, wrow, wm, wsw, fw, rho):
+    data = np.zeros(indptr[indptr.shape[0] - 1], np.float64)
+    G = np.zeros((6, 6), np.float64)
+    # edge pairs: pw (e_u - e_v)(e_u - e_v)^T (x) I in the tangent columns: the Gram matrix of
+    # the two vertices' tangent vectors, +pw on the own blocks and -pw on the mixed ones
+    for e in range(pu.shape[0]):
+        u, v = pu[e], pv[e]
+        for r in range(2):
+            x = u if r == 0 else v
+            for c in range(ncol[x]):
+                for r2 in range(2):
+                    y = u if r2 == 0 else v
+                    for c2 in range(ncol[y]):
+                        i, j = col_start[x] + c, col_start[y] + c2
+                        G[3 * r + c, 3 * r2 + c2] = tv[i, 0] * tv[j, 0] + tv[i, 1] * tv[j, 1] + tv[i, 2] * tv[j, 2]
+        if ncol[u] > 0:
+            _scatter(data, indptr, aoff, col_start, ncol, u, u, dslot[u], G, 0, 0, pw[e])
+        if ncol[v] > 0:
+            _scatter(data, indptr, aoff, col_start, ncol, v, v, dslot[v], G, 3, 3, pw[e])
+        if pslot[e, 0] >= 0:
+            _scatter(data, indptr, aoff, col_start, ncol, u, v, pslot[e, 0], G, 0, 3, -pw[e])
+            _scatter(data, indptr, aoff, col_start, ncol, v, u, pslot[e, 1], G, 3, 0, -pw[e])
+    # the quads: orthogonality corners (rows sqrt(w) M_role tv of roles a, b, c, as in
+    # ortho_jacobian) and planarity rows (sigma_k sw (m_k . tv)), summed per quad into a
+    # 12 x 12 block over its four vertices' columns, then added to the matrix
+    B = np.zeros((12, 12), np.float64)
+    J = np.zeros((12, 3), np.float64)
+    Jw = np.zeros(12, np.float64)
+    for q in range(quads.shape[0]):
+        B[:, :] = 0.0
+        if on.shape[0]:
+            for kk in range(4):
+                o = 4 * q + kk
+                n0, n1, n2 = on[o, 0], on[o, 1], on[o, 2]
+                su, sv, sw = osu[o], osv[o], osw[o]
+                for r in range(3):
+                    lv = (kk + r + 3) % 4              # a, b, c: the previous, own and next corner
+                    x = quads[q, lv]
+                    for c in range(ncol[x]):
+                        t0, t1, t2 = tv[col_start[x] + c, 0], tv[col_start[x] + c, 1], tv[col_start[x] + c, 2]
+                        k0, k1, k2 = n1 * t2 - n2 * t1, n2 * t0 - n0 * t2, n0 * t1 - n1 * t0
+                        if r == 0:
+                            j0, j1, j2 = su * t0, su * t1, su * t2
+                        elif r == 1:
+                            j0, j1, j2 = -su * t0 + sv * k0, -su * t1 + sv * k1, -su * t2 + sv * k2
+                        else:
+                            j0, j1, j2 = -sv * k0, -sv * k1, -sv * k2
+                        J[3 * lv + c, 0], J[3 * lv + c, 1], J[3 * lv + c, 2] = j0 * sw, j1 * sw, j2 * sw
+                for r in range(3):
+                    lv = (kk + r + 3) % 4
+                    x = quads[q, lv]
+                    for r2 in range(3):
+                        lv2 = (kk + r2 + 3) % 4
+                        y = quads[q, lv2]
+                        for c in range(ncol[x]):
+                            for c2 in range(ncol[y]):
+                                a_, b_ = 3 * lv + c, 3 * lv2 + c2
+                                B[a_, b_] += fo * (J[a_, 0] * J[b_, 0] + J[a_, 1] * J[b_, 1] + J[a_, 2] * J[b_, 2])
+        w = wrow[q]
+        if w >= 0:
+            for kk in range(4):
+                x = quads[q, kk]
+                sg = 1.0 if kk % 2 == 0 else -1.0
+                for c in range(ncol[x]):
+                    col = col_start[x] + c
+                    Jw[3 * kk + c] = sg * wsw[w] * (wm[w, kk, 0] * tv[col, 0] + wm[w, kk, 1] * tv[col, 1]
+                                                    + wm[w, kk, 2] * tv[col, 2])
+            for kk in range(4):
+                x = quads[q, kk]
+                for k2 in range(4):
+                    y = quads[q, k2]
+                    for c in range(ncol[x]):
+                        for c2 in range(ncol[y]):
+                            B[3 * kk + c, 3 * k2 + c2] += fw * (Jw[3 * kk + c] * Jw[3 * k2 + c2])
+        for i in range(4):
+            for j in range(4):
+                if qslot[q, i, j] >= 0:
+                    _scatter(data, indptr, aoff, col_start, ncol, quads[q, i], quads[q, j], qslot[q, i, j], B, 3 * i,
+                             3 * j, 1.0)
+    # the regulariser on the diagonal
+    for u in range(ncol.shape[0]):
+        if ncol[u] > 0:
+            for c in range(ncol[u]):
+                data[indptr[col_start[u] + c] + aoff[dslot[u]] + c] += rho[col_start[u] + c]
+    return data
+
+
+class ReducedHessian:
+    """The smoothing's reduced Hessian ``T^T (K (x) I) T + fo J_o^T J_o + fw J_w^T J_w +
+    diag(rho)`` (:func:`~shellmesh_mdao.smooth.smooth`) assembled by compiled loops into a
+    CSR pattern made once per mesh and set of moving vertices.
+
+    Vertex ``v`` owns the reduced columns ``col_start[v] .. col_start[v] + ncol[v] - 1``
+    (``ncol`` 0 to 3, columns numbered vertex by vertex in vertex order) with tangent
+    vectors ``tv`` (k, 3). The pattern couples two vertices with columns that are the ends
+    of a pair (``pu``, ``pv``: the energy's pairs, ``K = sum pw (e_u - e_v)(e_u - e_v)^T``)
+    or corners of one of ``quads`` (m, 4) (pass none when no quad term is used); each row's
+    columns are sorted. :meth:`values` adds the pairs' blocks, then quad by quad its
+    orthogonality corners' Gram blocks of ``sqrt(w) M_role tv`` (the rows of
+    :func:`ortho_jacobian`, corner ``kk`` of quad ``q`` at ``4 q + kk`` with roles previous,
+    own and next corner) and its planarity row ``sigma_k sw (m_k . tv)``, then ``rho`` on the
+    diagonal. Every sum of a block and of its mirror runs over the same products in the same
+    order, so the matrix is symmetric bit for bit."""
+
+    def __init__(self, pu, pv, quads, ncol, col_start):
+        self.pu, self.pv = (np.ascontiguousarray(v, dtype=np.int64).reshape(-1) for v in (pu, pv))
+        self.quads = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
+        self.ncol = np.ascontiguousarray(ncol, dtype=np.int64)
+        self.col_start = np.ascontiguousarray(col_start, dtype=np.int64)
+        n = len(self.ncol)
+        if len(self.pu) != len(self.pv):
+            raise ValueError("pu and pv must have one entry per pair")
+        for name, v in (("pu", self.pu), ("pv", self.pv), ("quads", self.quads.ravel())):
+            _check_index(name, v, n)
+        if len(self.col_start) != n or (n and (self.ncol.min() < 0 or self.ncol.max() > 3)):
+            raise ValueError("ncol must give 0 to 3 columns for each vertex of col_start")
+        self.k = int(self.ncol.sum())
+        own = np.flatnonzero(self.ncol > 0)
+        if not np.array_equal(self.col_start[own], (np.cumsum(self.ncol[own]) - self.ncol[own])):
+            raise ValueError("col_start must number the columns vertex by vertex, in vertex order")
+        vptr, vadj, self.aoff, self.indptr, self.indices = _hessian_pattern(self.pu, self.pv, self.quads, self.ncol,
+                                                                            self.col_start)
+        self.dslot, self.pslot, self.qslot = _hessian_slots(vptr, vadj, self.pu, self.pv, self.quads, self.ncol)
+
+    def values(self, tv, pw, rho, ortho=None, fo=1.0, warp=None, fw=1.0):
+        """The CSR data for the pattern. ``pw`` (one per pair), ``rho`` (k,); ``ortho``:
+        ``(n, su, sv, sw)`` of the ``4 m`` corners (``sw`` the weights' roots) or None;
+        ``warp``: ``(qi, m (len(qi), 4, 3), sw (len(qi),))`` of the quads ``quads[qi]`` or
+        None; ``fo``, ``fw`` the factors of the two quad terms."""
+        tv = np.ascontiguousarray(tv, dtype=np.float64).reshape(-1, 3)
+        pw = np.ascontiguousarray(pw, dtype=np.float64).reshape(-1)
+        rho = np.ascontiguousarray(rho, dtype=np.float64).reshape(-1)
+        nq = len(self.quads)
+        if len(tv) != self.k or len(rho) != self.k or len(pw) != len(self.pu):
+            raise ValueError(f"tv and rho need one row per column (k = {self.k}), pw one per pair")
+        if ortho is None:
+            on, osu, osv, osw = np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(0)
+        else:
+            on = np.ascontiguousarray(ortho[0], dtype=np.float64).reshape(-1, 3)
+            osu, osv, osw = (np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in ortho[1:])
+            if not (len(on) == len(osu) == len(osv) == len(osw) == 4 * nq):
+                raise ValueError("the orthogonality term needs n, su, sv and sw for the 4 corners of every quad")
+        wrow = np.full(nq, -1, np.int64)
+        if warp is None:
+            wm, wsw = np.zeros((0, 4, 3)), np.zeros(0)
+        else:
+            qi = np.asarray(warp[0], dtype=np.int64).reshape(-1)
+            wm = np.ascontiguousarray(warp[1], dtype=np.float64).reshape(-1, 4, 3)
+            wsw = np.ascontiguousarray(warp[2], dtype=np.float64).reshape(-1)
+            _check_index("warp quads", qi, nq)
+            if len(wm) != len(qi) or len(wsw) != len(qi) or len(np.unique(qi)) != len(qi):
+                raise ValueError("the planarity term needs distinct quads, each with one m and one sw")
+            wrow[qi] = np.arange(len(qi))
+        return _hessian_values(self.indptr, self.aoff, self.dslot, self.pslot, self.qslot, self.col_start, self.ncol,
+                               tv, self.pu, self.pv, pw, self.quads, on, osu, osv, osw, float(fo), wrow, wm, wsw,
+                               float(fw), rho)
+
+    def matrix(self, data):
+        from scipy import sparse
+        return sparse.csr_matrix((data, self.indices, self.indptr), shape=(self.k, self.k))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -1539,6 +1837,11 @@ def warm_up() -> float:
     ortho_jacobian(np.array([0]), np.array([1]), np.array([2]), np.array([[0.0, 0.0, 1.0]]), np.ones(1),
                    np.ones(1), np.ones(1), np.array([0, 2, 4]), np.array([2, 2, 0]), np.eye(3)[[0, 1, 0, 1]])
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
+    rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),
+                        np.array([2, 2, 1, 0]), np.array([0, 2, 4, 5]))
+    rh.values(np.eye(3)[[0, 1, 0, 1, 2]], np.ones(4), np.ones(5),
+              ortho=(np.tile([0.0, 0.0, 1.0], (4, 1)), np.ones(4), np.ones(4), np.ones(4)),
+              warp=(np.array([0]), np.ones((1, 4, 3)), np.ones(1)))
     min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]), np.array([[0.0, 0.0, 1.0]]))
     min_corner_sj(np.eye(3), np.array([[0, 1, 2, -1]]), np.array([True]))
     face_quality(np.zeros((1, 4, 3)), np.array([True]), np.array([[0.0, 0.0, 1.0]]))

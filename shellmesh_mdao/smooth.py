@@ -63,7 +63,8 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import _Background, closest_on_curves, face_quality, min_corner_sj, ortho_gradient, ortho_jacobian
+from .kernels import (ReducedHessian, _Background, closest_on_curves, face_quality, min_corner_sj, ortho_gradient,
+                      ortho_jacobian)
 from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -980,6 +981,11 @@ class _Ortho:
         :func:`~shellmesh_mdao.kernels.ortho_gradient`)."""
         return ortho_gradient(self.a, self.b, self.c, self.n, self.su, self.sv, self.w, x, n)
 
+    def terms(self):
+        """The corners as :meth:`~shellmesh_mdao.kernels.ReducedHessian.values` takes them
+        (``4 q + k`` the corner ``k`` of quad ``q``): ``(n, su, sv, sqrt(w))``."""
+        return self.n, self.su, self.sv, np.sqrt(self.w)
+
     def block_trace(self, n):
         """Mean diagonal of each vertex's 3x3 block of the Hessian."""
         w = self.w
@@ -1042,7 +1048,7 @@ class _Warp:
         self.n = _unit(cross_rows(C[:, 2] - C[:, 0], C[:, 3] - C[:, 1])) if len(Q) else np.zeros((0, 3))
         ld = 0.5 * (_norm(C[:, 2] - C[:, 0]) + _norm(C[:, 3] - C[:, 1])) if len(Q) else np.zeros(0)
         sel = (ld > 0) & (warp(P, Q) > warp_from) if len(Q) else np.zeros(0, bool)
-        q, n, ld = Q[sel], self.n[sel], ld[sel]
+        q, n, ld, qi = Q[sel], self.n[sel], ld[sel], np.flatnonzero(sel)
         if warp_spread < 180.0 and len(q):
             # a face draped over a crease or round much tighter than itself (its corners'
             # supports turned more than warp_spread apart) cannot be flattened by sliding its
@@ -1051,12 +1057,12 @@ class _Warp:
             nrm = np.zeros((len(P), 3))
             nrm[used] = support_normals(used)
             keep = ~_draped_vertices(faces, nrm, warp_spread)[q].any(1)
-            q, n, ld = q[keep], n[keep], ld[keep]
+            q, n, ld, qi = q[keep], n[keep], ld[keep], qi[keep]
             fq = nrm[q]                                                 # (m, 4, 3)
         else:
             verts, inv = np.unique(q, return_inverse=True)
             fq = support_normals(verts)[inv.reshape(q.shape)]
-        self.q, self.n = q, n
+        self.q, self.n, self.qi = q, n, qi
         self.s = 1.0 / ld
         self.w = scale * ld
         self.m = self.n[:, None, :] - np.einsum("mj,mkj->mk", self.n, fq)[:, :, None] * fq
@@ -1081,25 +1087,10 @@ class _Warp:
             t += np.bincount(self.q[:, k], weights=self.w * self.s ** 2 / 3.0, minlength=n)
         return t
 
-    def hessian(self, col_start, ncol, tv, k):
-        """Hessian J_T^T W J_T in the reduced coordinates (see :meth:`_Ortho.hessian`)."""
-        m = len(self.q)
-        rows, cols, vals = [], [], []
-        sw = np.sqrt(self.w) * self.s
-        for kk in range(4):
-            v = self.q[:, kk]
-            for jc in range(3):
-                sel = np.flatnonzero(ncol[v] > jc)
-                if not len(sel):
-                    continue
-                col = col_start[v[sel]] + jc
-                rows.append(sel)
-                cols.append(col)
-                vals.append(self.SIGMA[kk] * sw[sel] * _dot(self.m[sel, kk], tv[col]))
-        if not rows:
-            return sparse.csr_matrix((k, k))
-        J = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, k))
-        return (J.T @ J).tocsr()
+    def terms(self):
+        """The quads as :meth:`~shellmesh_mdao.kernels.ReducedHessian.values` takes them:
+        ``(qi, m, sqrt(w) / l)``, ``qi`` their rows in the mesh's quads."""
+        return self.qi, self.m, np.sqrt(self.w) * self.s
 
 
 def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy: str = "length",
@@ -1205,7 +1196,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     if solver == "auto":
         method = "lu" if int(dof.sum()) <= AUTO_LU_MAX_UNKNOWNS else "cg"
     moves, halvings, rejected, nfact, n_jump, n_fold = [], 0, 0, 0, 0, 0
-    lin = T = nrm = ortho = warpt = None
+    lin = T = nrm = ortho = warpt = hess = None
     it = 0
     for it in range(1, iterations + 1):
         if not len(movable):
@@ -1225,40 +1216,44 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
             K = sparse.coo_matrix((np.concatenate([pw, pw, -pw, -pw]),
                                    (np.concatenate([i, j, i, j]), np.concatenate([i, j, j, i]))),
                                   shape=(n, n)).tocsr()
-            K3 = sparse.kron(K, sparse.identity(3), format="csr")
-            k = T.shape[1]
-            H = (T.T @ K3 @ T).tocsr()
             diag_v = np.asarray(K.diagonal(), dtype=np.float64)
+            col_start = np.searchsorted(owner, np.arange(n))
             ortho = None
             if ortho_weight > 0 and mesh.n_quads:
                 ortho = _Ortho(P, faces, ~is_tri, scale)
-                col_start = np.searchsorted(owner, np.arange(n))
-                H = H + ortho_weight * ortho.hessian(col_start, dof, tv, k)
                 diag_v = diag_v + ortho_weight * ortho.block_trace(n)
-                if method == "kkt":        # full 3n matrix for the literal eq. 8
-                    K3 = K3 + ortho_weight * ortho.hessian(3 * np.arange(n), np.full(n, 3),
-                                                           np.tile(np.eye(3), (n, 1)), 3 * n)
             warpt = None
             if warp_weight > 0 and mesh.n_quads and method != "kkt":
                 warpt = _Warp(P, faces, ~is_tri, scale, lambda v: _support_normals(supports, P, v), warp_from,
                               warp_spread)
                 if len(warpt):
-                    col_start = np.searchsorted(owner, np.arange(n))
-                    H = H + warp_weight * warpt.hessian(col_start, dof, tv, k)
                     diag_v = diag_v + warp_weight * warpt.block_trace(n)
                 else:
                     warpt = None
             rho_v = reg * diag_v * (1.0 + curvature_weight * kap)
-            H = (H + sparse.diags(rho_v[owner])).tocsc()
-            if method != "kkt":
+            if method == "kkt":            # full 3n matrix for the literal eq. 8
+                K3 = sparse.kron(K, sparse.identity(3), format="csr")
+                if ortho is not None:
+                    K3 = K3 + ortho_weight * ortho.hessian(3 * np.arange(n), np.full(n, 3),
+                                                           np.tile(np.eye(3), (n, 1)), 3 * n)
+            else:
+                if hess is None:           # the pattern: pairs, and whole quads where a quad term is used
+                    quad_terms = mesh.n_quads and (ortho_weight > 0 or warp_weight > 0)
+                    hess = ReducedHessian(i, j, faces[~is_tri] if quad_terms else np.zeros((0, 4), np.int64), dof,
+                                          col_start)
+                H = hess.matrix(hess.values(tv, pw, rho_v[owner], ortho=None if ortho is None else ortho.terms(),
+                                            fo=ortho_weight,
+                                            warp=None if warpt is None else warpt.terms(), fw=warp_weight))
                 lin = _Linear(H, method)
             nfact += 1
         # gradient of the energy at D = 0 (homogeneous quadratic: K3 x, plus rest vectors)
         xc = P - P.mean(0)
-        if method == "kkt" or ortho is None:
+        if method == "kkt":
             g = K3 @ xc.ravel()
+        elif ortho is None:
+            g = (K @ xc).ravel()
         else:
-            g = K3 @ xc.ravel() + ortho_weight * ortho.gradient(xc, n).ravel()
+            g = (K @ xc).ravel() + ortho_weight * ortho.gradient(xc, n).ravel()
         if warpt is not None:
             g = g + warp_weight * warpt.gradient(xc, n).ravel()
         if target_edge is not None and energy == "squared":

@@ -4,7 +4,7 @@ import pytest
 
 from scipy import sparse
 
-from shellmesh_mdao.kernels import (closest_on_curves, common_neighbour_counts, greedy_independent,
+from shellmesh_mdao.kernels import (ReducedHessian, closest_on_curves, common_neighbour_counts, greedy_independent,
                                     greedy_independent_rings, min_corner_sj, ortho_gradient, ortho_jacobian,
                                     stable_order, stable_pair_order)
 from shellmesh_mdao.mesh import cross_rows
@@ -219,6 +219,77 @@ def test_ortho_gradient_matches_bincounts_and_the_jacobian(seed):
     J = sparse.csr_matrix(ortho_jacobian(a, b, c, n, su, sv, np.sqrt(w), 3 * np.arange(nv), np.full(nv, 3),
                                          np.tile(np.eye(3), (nv, 1))), shape=(3 * m, 3 * nv))
     assert np.allclose(got.ravel(), J.T @ (J @ x.ravel()), rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_reduced_hessian_matches_the_scipy_products(seed):
+    """The smoothing's Hessian assembled by ReducedHessian equals T^T (K (x) I) T + fo J_o^T J_o
+    + fw J_w^T J_w + diag(rho) built with scipy products (the assembly it replaced), is
+    symmetric bit for bit, and its pattern holds every coupling of two vertices with columns."""
+    rng = np.random.default_rng(900 + seed)
+    nq = int(rng.integers(1, 150))
+    nv = 4 * nq // 2 + 8
+    quads = np.array([rng.choice(nv, 4, replace=False) for _ in range(nq)])
+    pairs = np.unique(np.sort(np.vstack([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]]),
+                              axis=1), axis=0)
+    ncol = rng.integers(0, 3, nv)                     # fixed, curve, plane/surface vertices
+    ncol[rng.permutation(nv)[:2]] = 3
+    col_start = np.concatenate([[0], np.cumsum(ncol)[:-1]])
+    k = int(ncol.sum())
+    owner = np.repeat(np.arange(nv), ncol)
+    tv = rng.normal(size=(k, 3))
+    pw = rng.uniform(0.2, 2.0, len(pairs))
+    rho = rng.uniform(0.0, 1.0, k)
+    # orthogonality corners of every quad, planarity rows of some
+    a = np.roll(quads, 1, axis=1).ravel()
+    b = quads.ravel()
+    c = np.roll(quads, -1, axis=1).ravel()
+    n = rng.normal(size=(len(b), 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    su, sv, sw = rng.uniform(0.1, 3.0, (3, len(b)))
+    wsel = rng.random(nq) < 0.5
+    wq = quads[wsel]
+    wm = rng.normal(size=(len(wq), 4, 3))
+    wsw = rng.uniform(0.1, 2.0, len(wq))
+    fo, fw = 0.7, 1.3
+    hess = ReducedHessian(pairs[:, 0], pairs[:, 1], quads, ncol, col_start)
+    H = hess.matrix(hess.values(tv, pw, rho, ortho=(n, su, sv, sw), fo=fo, warp=(np.flatnonzero(wsel), wm, wsw),
+                                fw=fw))
+    assert H.has_sorted_indices
+    T = sparse.csr_matrix((tv.ravel(), ((3 * owner[:, None] + np.arange(3)).ravel(), np.repeat(np.arange(k), 3))),
+                          shape=(3 * nv, k))
+    i, j = pairs.T
+    K = sparse.coo_matrix((np.concatenate([pw, pw, -pw, -pw]), (np.concatenate([i, j, i, j]),
+                                                                np.concatenate([i, j, j, i]))), shape=(nv, nv))
+    Jo = sparse.csr_matrix(ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv), shape=(3 * len(b), k))
+    sig = np.array([1.0, -1.0, 1.0, -1.0])
+    Jw = np.zeros((len(wq), k))
+    for kk in range(4):
+        for jc in range(3):
+            sel = np.flatnonzero(ncol[wq[:, kk]] > jc)
+            col = col_start[wq[sel, kk]] + jc
+            Jw[sel, col] += sig[kk] * wsw[sel] * np.einsum("ij,ij->i", wm[sel, kk], tv[col])
+    ref = (T.T @ sparse.kron(K, sparse.identity(3)) @ T + fo * (Jo.T @ Jo) + fw * sparse.csr_matrix(Jw.T @ Jw)
+           + sparse.diags(rho)).toarray()
+    got = H.toarray()
+    assert np.allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    assert np.array_equal(got, got.T)
+    # the pattern: every nonzero of the reference is in it, and only couplings of pairs and quads
+    Hp = sparse.csr_matrix((np.ones(H.nnz), H.indices, H.indptr), shape=(k, k)).toarray() > 0
+    assert (ref[~Hp] == 0).all()
+    near = np.zeros((nv, nv), bool)
+    near[np.arange(nv), np.arange(nv)] = True
+    for q in quads:
+        near[np.ix_(q, q)] = True
+    assert np.array_equal(Hp, near[np.ix_(owner, owner)])
+    # no quad terms: the pattern is the pairs' alone
+    hp = ReducedHessian(pairs[:, 0], pairs[:, 1], np.zeros((0, 4), np.int64), ncol, col_start)
+    Hp2 = hp.matrix(hp.values(tv, pw, rho)).toarray()
+    ref2 = (T.T @ sparse.kron(K, sparse.identity(3)) @ T + sparse.diags(rho)).toarray()
+    assert np.allclose(Hp2, ref2, rtol=1e-12, atol=1e-12 * np.abs(ref2).max())
+    adj = np.eye(nv, dtype=bool)
+    adj[i, j] = adj[j, i] = True
+    assert np.array_equal(hp.matrix(np.ones(len(hp.indices))).toarray() > 0, adj[np.ix_(owner, owner)])
 
 
 @pytest.mark.parametrize("seed", range(4))
