@@ -240,6 +240,17 @@ class _Solve:
     dual_bound: float = float("nan")
 
 
+def _highs_core(highspy):
+    """HiGHS's solver class without highspy's Python wrapper, whose constructor turns on its
+    callbacks and with them prints HiGHS's banner to standard output before any option can
+    be set (highspy 1.16); the wrapper where the core is not exposed. We use no callbacks."""
+    try:
+        from highspy._core import _Highs
+    except ImportError:  # pragma: no cover - other highspy layouts
+        return highspy.Highs
+    return _Highs
+
+
 def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, time_limit: float,
                  mip_gap: float | None = None, start: np.ndarray | None = None) -> _Solve:
     """Solve ``min c^T x, row_lo <= A x <= row_hi, 0 <= x <= ub`` with HiGHS.
@@ -255,7 +266,7 @@ def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, 
     n = len(c)
     A = sparse.csr_matrix(A)
     A.sort_indices()
-    h = highspy.Highs()
+    h = _highs_core(highspy)()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("random_seed", 0)
     h.setOptionValue("presolve", "off" if not integer else "choose")

@@ -341,3 +341,18 @@ def test_split_timing_100k(geometry_dir):
           f"LP {res.lp_seconds:.1f} s, MIP {res.mip_seconds:.1f} s, total {res.seconds:.1f} s")
     assert res.status == "Optimal"
     assert_conforming(out)
+
+
+def test_highs_solve_prints_nothing(capfd):
+    """A solve writes nothing to standard output or error: HiGHS's banner and log would land in
+    the middle of the CLI's progress lines and of a caller's own output."""
+    from scipy import sparse
+
+    from shellmesh_mdao.split import _highs_solve
+    A = sparse.csr_matrix(np.array([[1.0, 1.0]]))
+    for integer in (False, True):
+        res = _highs_solve(np.array([1.0, 2.0]), A, np.array([1.0]), np.array([1.0]), np.ones(2), integer=integer,
+                           time_limit=10.0)
+        assert res.status == "Optimal" and np.allclose(res.x, [1.0, 0.0])
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
