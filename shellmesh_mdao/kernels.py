@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "ReducedHessian", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
+           "ortho_gradient", "ReducedHessian", "chain_walk", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
            "stable_pair_order", "edge_table", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -427,6 +427,125 @@ def ortho_gradient(a, b, c, n, su, sv, w, x, nv):
         raise ValueError(f"x must hold the nv = {nv} positions")
     a, b, c, n, su, sv, w = _corners(a, b, c, n, su, sv, w, nv)
     return _ortho_gradient(a, b, c, n, su, sv, w, x, nv)
+
+
+# ============================================================================ polylines
+@njit(cache=True, nogil=True)
+def _chain_walk(e, n):
+    k = e.shape[0]
+    deg = np.zeros(n, np.int64)
+    for i in range(k):
+        deg[e[i, 0]] += 1
+        deg[e[i, 1]] += 1
+    ptr = np.zeros(n + 1, np.int64)
+    for v in range(n):
+        ptr[v + 1] = ptr[v] + deg[v]
+    inc = np.empty(ptr[n], np.int64)
+    fill = ptr[:n].copy()
+    for i in range(k):                     # each node's edges by rising edge id
+        inc[fill[e[i, 0]]] = i
+        fill[e[i, 0]] += 1
+        inc[fill[e[i, 1]]] = i
+        fill[e[i, 1]] += 1
+    seen = np.zeros(k, np.bool_)
+    nodes = np.empty(2 * k + k, np.int64)
+    optr = np.zeros(k + 1, np.int64)
+    closed = np.zeros(k, np.bool_)
+    fwd = np.empty(k + 1, np.int64)
+    bwd = np.empty(k + 1, np.int64)
+    fe = np.empty(k + 1, np.int64)
+    be = np.empty(k + 1, np.int64)
+    nc = 0
+    m = 0
+    for i in range(k):
+        if seen[i]:
+            continue
+        # the chain of edge i: walk on through nodes of degree 2 from both of its ends
+        seen[i] = True
+        a, b = e[i, 0], e[i, 1]
+        nf = 0
+        fwd[0] = b
+        cur, pe = b, i
+        cyc = False
+        while deg[cur] == 2:
+            ne = inc[ptr[cur]] if inc[ptr[cur]] != pe else inc[ptr[cur] + 1]
+            if ne == i:
+                cyc = True
+                break
+            seen[ne] = True
+            cur = e[ne, 1] if e[ne, 0] == cur else e[ne, 0]
+            pe = ne
+            nf += 1
+            fwd[nf] = cur
+        fe_last = pe                       # the edge that ends the forward walk
+        nb = 0
+        bwd[0] = a
+        be_last = i
+        if not cyc:
+            cur, pe = a, i
+            while deg[cur] == 2:
+                ne = inc[ptr[cur]] if inc[ptr[cur]] != pe else inc[ptr[cur] + 1]
+                seen[ne] = True
+                cur = e[ne, 1] if e[ne, 0] == cur else e[ne, 0]
+                pe = ne
+                nb += 1
+                bwd[nb] = cur
+            be_last = pe
+        # the sequence: bwd reversed, then fwd (a chain of len nb + nf + 2 nodes)
+        L = nb + 1 + nf + 1
+        s = m
+        for t in range(nb + 1):
+            nodes[s + t] = bwd[nb - t]
+        for t in range(nf + 1):
+            nodes[s + nb + 1 + t] = fwd[t]
+        if cyc:
+            # a loop: from its lowest node, first towards the lower of that node's two neighbours
+            L -= 1                         # the walk came back to its start: drop the repeat
+            lo = 0
+            for t in range(1, L):
+                if nodes[s + t] < nodes[s + lo]:
+                    lo = t
+            nx = nodes[s + (lo + 1) % L]
+            pv = nodes[s + (lo - 1 + L) % L]
+            for t in range(L):
+                fe[t] = nodes[s + t]
+            for t in range(L):
+                if nx < pv:
+                    nodes[s + t] = fe[(lo + t) % L]
+                else:
+                    nodes[s + t] = fe[(lo - t + L) % L]
+            closed[nc] = True
+        else:
+            # a path between two break nodes: from the lower one; from the end of the lower
+            # edge where both ends are one node
+            first, last = nodes[s], nodes[s + L - 1]
+            rev = last < first or (last == first and fe_last < be_last)
+            if rev:
+                for t in range(L // 2):
+                    x = nodes[s + t]
+                    nodes[s + t] = nodes[s + L - 1 - t]
+                    nodes[s + L - 1 - t] = x
+        m += L
+        nc += 1
+        optr[nc] = m
+    return nodes[:m], optr[:nc + 1], closed[:nc]
+
+
+def chain_walk(edges, n):
+    """The polylines of an edge graph: chains of edges broken at every node whose degree is
+    not 2, and loops. ``edges`` (k, 2): distinct sorted rows of node ids in [0, n), no
+    self-loops. Returns ``(nodes, ptr, closed)``: chain ``c`` is ``nodes[ptr[c]:ptr[c + 1]]``,
+    ``closed[c]`` for a loop (its first node not repeated). Chains come in the order of their
+    lowest edge; a path runs from its lower end node (from the end of its lower edge where
+    both ends are one node), a loop from its lowest node towards the lower of that node's two
+    neighbours (the walks of scipy's ``depth_first_order`` on the graph with the break nodes
+    split, which :func:`~shellmesh_mdao.smooth.polylines_from_edges` used)."""
+    e = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
+    n = int(n)
+    _check_index("edges", e.ravel(), n)
+    if len(e) and ((e[:, 0] >= e[:, 1]).any() or (len(e) > 1 and not (np.diff(e[:, 0] * n + e[:, 1]) > 0).all())):
+        raise ValueError("edges must be distinct rows (u, v) with u < v, sorted")
+    return _chain_walk(e, n)
 
 
 # ============================================================================ smoothing Hessian
@@ -1837,6 +1956,7 @@ def warm_up() -> float:
     ortho_jacobian(np.array([0]), np.array([1]), np.array([2]), np.array([[0.0, 0.0, 1.0]]), np.ones(1),
                    np.ones(1), np.ones(1), np.array([0, 2, 4]), np.array([2, 2, 0]), np.eye(3)[[0, 1, 0, 1]])
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
+    chain_walk(np.array([[0, 1], [0, 2], [1, 2], [2, 3]]), 4)
     rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),
                         np.array([2, 2, 1, 0]), np.array([0, 2, 4, 5]))
     rh.values(np.eye(3)[[0, 1, 0, 1, 2]], np.ones(4), np.ones(5),

@@ -35,10 +35,10 @@ orthonormal tangent basis ``T`` (``D = T u``, null-space method): the same minim
 KKT system eq. 8 (``solver="kkt"`` assembles eq. 8 literally; a test checks they agree),
 with a symmetric positive definite matrix ``T^T A T + diag(rho)`` of half the size. That
 matrix depends only on the mesh, the weights and the tangent frames, so it is built (and,
-with ``solver="lu"``, factorised by ``scipy.sparse.linalg.splu``) once and reused for
+with ``solver="lu"``, factorised as L D L^T by ``qdldl``) once and reused for
 ``refresh`` steps, during which only the right-hand side changes; above
 :data:`AUTO_LU_MAX_UNKNOWNS` unknowns the default solves it by Jacobi-preconditioned CG
-instead (cheaper than the LU fill-in, the regulariser keeps it well conditioned).
+instead (cheaper than the factorisation's fill-in, the regulariser keeps it well conditioned).
 
 Each step is clipped per vertex to ``trust`` times the distance to the nearest other
 vertex (the paper's ``m D <= r``), the moved vertices are projected onto their supports,
@@ -58,13 +58,14 @@ import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
+import qdldl
 from scipy import sparse
 from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import (ReducedHessian, _Background, closest_on_curves, face_quality, min_corner_sj, ortho_gradient,
-                      ortho_jacobian)
+from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, face_quality, min_corner_sj,
+                      ortho_gradient, ortho_jacobian)
 from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -438,8 +439,8 @@ def polylines_from_edges(points, edges) -> list:
 
     Returns a list of ``(node_indices, closed)``; point coordinates are ``points[node_indices]``.
     Deterministic: chains are ordered by their smallest edge index and walk from the
-    lower-index end (closed loops from their lowest node)."""
-    from scipy.sparse.csgraph import connected_components, depth_first_order
+    lower-index end (closed loops from their lowest node, towards its lower neighbour); one
+    compiled walk (:func:`~shellmesh_mdao.kernels.chain_walk`)."""
     e = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), axis=1), axis=0)
     e = e[e[:, 0] != e[:, 1]]
     if not len(e):
@@ -447,33 +448,9 @@ def polylines_from_edges(points, edges) -> list:
     # the graph on the edges' own nodes, renumbered in order (a member's few edges among a
     # mesh's many nodes): the same chains, walks and order as on the mesh's numbering
     used, inv = np.unique(e, return_inverse=True)
-    e = inv.reshape(-1, 2)
-    n = len(used)
-    deg = np.bincount(e.ravel(), minlength=n)
-    brk = deg != 2
-    # duplicate every break node once per incident edge, so components are simple paths/cycles
-    k = len(e)
-    he_node = e.ravel()                                    # half-edge endpoints, edge id = i // 2
-    node_id = np.where(brk[he_node], n + np.arange(2 * k), he_node)
-    g = sparse.coo_matrix((np.ones(k), (node_id[0::2], node_id[1::2])), shape=(n + 2 * k, n + 2 * k)).tocsr()
-    g = ((g + g.T) > 0).astype(np.int8).tocsr()
-    ncomp, lab = connected_components(g, directed=False)
-    elab = lab[node_id[0::2]]
-    first_edge = np.full(ncomp, k, np.int64)
-    np.minimum.at(first_edge, elab, np.arange(k))
-    orig = used[np.concatenate([np.arange(n), he_node])]   # graph node -> mesh node
-    out = []
-    for c in np.argsort(first_edge, kind="stable"):
-        if first_edge[c] >= k:
-            continue
-        nodes = np.flatnonzero(lab == c)
-        gdeg = np.diff(g.indptr)[nodes]
-        ends = nodes[gdeg == 1]
-        closed = len(ends) == 0
-        start = int(ends[np.argmin(orig[ends])]) if not closed else int(nodes[np.argmin(orig[nodes])])
-        order = depth_first_order(g, start, directed=False, return_predecessors=False)
-        out.append((orig[order].astype(np.int64), closed))
-    return out
+    nodes, ptr, closed = chain_walk(inv.reshape(-1, 2), len(used))
+    orig = used[nodes]
+    return [(orig[ptr[c]:ptr[c + 1]], bool(closed[c])) for c in range(len(closed))]
 
 
 def _plane_array(planes_dict, ncomp):
@@ -910,14 +887,14 @@ def _nearest_other(P, verts):
 
 
 class _Linear:
-    """Solver of the reduced system H u = b: sparse LU (factorised once, reused for every
+    """Solver of the reduced system H u = b (H symmetric positive definite, symmetric bit for
+    bit): a sparse LDL^T factorisation (qdldl, AMD ordering; made once, reused for every
     right-hand side) or Jacobi-preconditioned conjugate gradients on the same matrix."""
 
     def __init__(self, H, method: str):
         self.method = method
         if method == "lu":
-            self.lu = spla.splu(H.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                                options={"SymmetricMode": True})
+            self.lu = qdldl.Solver(sparse.triu(H, format="csc"), upper=True)
         else:
             self.H = H.tocsr()
             d = self.H.diagonal()
@@ -1143,7 +1120,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     min_dot : a skin vertex may only be projected onto input triangles whose normal has a
         dot product above this with the vertex normal.
     tol : stop when the largest move of a step is below ``tol`` times the median edge.
-    solver : ``"lu"`` (scipy splu of the reduced KKT system, reused for ``refresh`` steps),
+    solver : ``"lu"`` (sparse L D L^T of the reduced system by qdldl, reused for ``refresh`` steps),
         ``"cg"`` (Jacobi-preconditioned CG on the same matrix), ``"auto"`` (LU up to
         :data:`AUTO_LU_MAX_UNKNOWNS` unknowns, CG above) or ``"kkt"`` (eq. 8 assembled
         literally; small meshes only, for checks).

@@ -220,6 +220,62 @@ def test_polylines_do_not_depend_on_the_node_numbering():
     assert [(ix.tolist(), cl) for ix, cl in got] == [(spread[ix].tolist(), cl) for ix, cl in ref]
 
 
+def _polylines_by_scipy(edges):
+    """The chains as found before the compiled walk: connected components and depth-first
+    order of the graph with every break node split once per incident edge."""
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components, depth_first_order
+    e = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), axis=1), axis=0)
+    e = e[e[:, 0] != e[:, 1]]
+    used, inv = np.unique(e, return_inverse=True)
+    e = inv.reshape(-1, 2)
+    n, k = len(used), len(e)
+    brk = np.bincount(e.ravel(), minlength=n) != 2
+    he = e.ravel()
+    node = np.where(brk[he], n + np.arange(2 * k), he)
+    g = sparse.coo_matrix((np.ones(k), (node[0::2], node[1::2])), shape=(n + 2 * k, n + 2 * k)).tocsr()
+    g = ((g + g.T) > 0).astype(np.int8).tocsr()
+    ncomp, lab = connected_components(g, directed=False)
+    first = np.full(ncomp, k, np.int64)
+    np.minimum.at(first, lab[node[0::2]], np.arange(k))
+    orig = used[np.concatenate([np.arange(n), he])]
+    out = []
+    for c in np.argsort(first, kind="stable"):
+        if first[c] >= k:
+            continue
+        nodes = np.flatnonzero(lab == c)
+        ends = nodes[np.diff(g.indptr)[nodes] == 1]
+        start = int(ends[np.argmin(orig[ends])]) if len(ends) else int(nodes[np.argmin(orig[nodes])])
+        out.append((orig[depth_first_order(g, start, directed=False, return_predecessors=False)].tolist(),
+                    not len(ends)))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_polylines_match_the_scipy_walks(seed):
+    """polylines_from_edges (one compiled walk) gives the chains, their order and their walks
+    of the components and depth-first orders it replaced: random graphs of paths, loops,
+    loops through a break node, branch points and isolated edges."""
+    rng = np.random.default_rng(40 + seed)
+    edges = []
+    nxt = 0
+    for _ in range(int(rng.integers(1, 12))):
+        L = int(rng.integers(1, 9))
+        kind = rng.integers(0, 3)
+        ids = list(range(nxt, nxt + L + 1))
+        nxt += L + 1
+        if kind == 1 and L >= 2:
+            ids[-1] = ids[0]                               # a loop
+        edges += [(ids[t], ids[t + 1]) for t in range(L)]
+        if kind == 2 and nxt > 3:                          # join to an earlier node: a branch
+            edges.append((ids[0], int(rng.integers(0, ids[0] + 1))))
+    edges = np.array([e for e in edges if e[0] != e[1]])
+    perm = rng.permutation(nxt)                           # any numbering
+    edges = perm[edges]
+    got = polylines_from_edges(np.zeros((nxt, 3)), edges)
+    assert [(ix.tolist(), cl) for ix, cl in got] == _polylines_by_scipy(edges)
+
+
 @pytest.mark.parametrize("scan", [0, 40, 512])
 def test_curve_set_matches_each_curve_bit_for_bit(scan, monkeypatch):
     """CurveSet answers every curve in one query and must give exactly what each Curve gives on
