@@ -87,8 +87,8 @@ def plane_section(points: np.ndarray, tris: np.ndarray, plane: Plane, zero_verti
     if zero_vertices is not None and len(zero_vertices):
         d[np.asarray(zero_vertices, np.int64)] = 0.0
     pos = d >= 0.0
-    s = pos[tris]
-    crossed = np.flatnonzero(s.any(1) & ~s.all(1))
+    p0 = pos[tris[:, 0]]
+    crossed = np.flatnonzero((p0 != pos[tris[:, 1]]) | (p0 != pos[tris[:, 2]]))   # not all on one side
     if not len(crossed):
         return PlaneSection(np.zeros((0, 3)), np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64),
                             np.zeros(0, np.int64))
@@ -98,10 +98,11 @@ def plane_section(points: np.ndarray, tris: np.ndarray, plane: Plane, zero_verti
     cut = pos[a] != pos[b]                               # exactly two True per row
     rows, cols = np.nonzero(cut)
     ea, eb = a[rows, cols], b[rows, cols]
-    lo, hi = np.minimum(ea, eb), np.maximum(ea, eb)
-    keys = np.stack([lo, hi], 1)
-    node_edge, node_of = np.unique(keys, axis=0, return_inverse=True)
+    lo, hi = np.minimum(ea, eb).astype(np.int64), np.maximum(ea, eb).astype(np.int64)
+    npt = np.int64(len(points))
+    key, node_of = np.unique(lo * npt + hi, return_inverse=True)      # edges in (lo, hi) order
     node_of = node_of.reshape(-1)
+    node_edge = np.stack([key // npt, key % npt], 1)
     # interpolate from the lower-index vertex so both triangles sharing an edge give the same point
     dl, dh = d[node_edge[:, 0]], d[node_edge[:, 1]]
     tpar = dl / (dl - dh)

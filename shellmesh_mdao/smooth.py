@@ -479,8 +479,12 @@ def _distinct_count(v, vals, n):
     lo = np.full(n, np.iinfo(np.int64).max)
     hi = np.full(n, np.iinfo(np.int64).min)
     if len(v):
-        u = np.unique(np.stack([v, vals], 1), axis=0)
-        cnt = np.bincount(u[:, 0], minlength=n)
+        v = np.asarray(v, np.int64)
+        vals = np.asarray(vals, np.int64)
+        base = int(vals.min())
+        span = int(vals.max()) - base + 1
+        u = np.unique(v * span + (vals - base))          # one key per distinct (vertex, value) pair
+        cnt = np.bincount(u // span, minlength=n)
         np.minimum.at(lo, v, vals)
         np.maximum.at(hi, v, vals)
     return cnt, lo, hi
