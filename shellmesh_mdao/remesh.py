@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, SizeError
 from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, edge_table, facing_ok, flip_tests,
                       greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
-from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
+from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
 from .project import SurfaceLocator, closest_point_on_triangles
 
 __all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION",
@@ -198,7 +198,7 @@ class _Surface:
         if locator is not None and (locator.triangles.shape != self.T.shape):
             self.loc = SurfaceLocator(self.P, self.T)
         nv = len(self.P)
-        self.diag = float(np.linalg.norm(self.P.max(0) - self.P.min(0)))
+        self.diag = bbox_diagonal(self.P)
         self.target = float(target)
         An = _tri_normals(self.P, self.T)
         self.tri_area2 = _norm(An)
