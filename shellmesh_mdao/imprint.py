@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from .errors import ImprintError
 from .kernels import chain_walk, corner_cosines, greedy_independent, stable_pair_order
-from .mesh import ShellMesh, bbox_diagonal, cross_rows, vertex_faces, norm_rows
+from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain",
@@ -132,7 +132,7 @@ def _snap_keeps_star(P, T, v, x, min_angle: float = 1.0):
     above its own smallest angle before the move). A crossing point lying on an edge
     opposite ``v`` (a point on a sharp trailing edge next to a skin vertex) would otherwise
     turn that triangle into a zero-area sliver."""
-    star = T[(T == v).any(1)]
+    star = T[reduce_short(T == v, "any")]
     if not len(star):
         return True
     Q = P.copy()
@@ -163,7 +163,7 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
     # candidate triangles: the 32 nearest centroids (nearest first; one point, so a plain
     # scan beats building a tree), then exact point-triangle distance
     k = min(32, len(T))
-    d2 = ((cen - x) ** 2).sum(1)
+    d2 = reduce_short((cen - x) ** 2, "sum")
     cand = np.argpartition(d2, k - 1)[:k] if k < len(T) else np.arange(len(T))
     cand = cand[np.argsort(d2[cand], kind="stable")]
     bary, dist = _point_tri(x, a[cand], b[cand], c[cand])
@@ -187,8 +187,8 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
         # split the edge opposite the smallest barycentric coordinate
         i = int(np.argmin(w))
         u, v = tri[(i + 1) % 3], tri[(i + 2) % 3]
-        has_u = (T == u).any(1)
-        has_v = (T == v).any(1)
+        has_u = reduce_short(T == u, "any")
+        has_v = reduce_short(T == v, "any")
         faces = np.flatnonzero(has_u & has_v)
         newT, newC = [], []
         keep = np.ones(len(T), bool)
@@ -306,7 +306,7 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     # its third corner already on the plane): an all-zero face breaks the chain there
     snapped = np.zeros(len(P), bool)
     snapped[close] = True
-    near = T[snapped[T].any(1)]
+    near = T[reduce_short(snapped[T], "any")]
     for _ in range(10):
         allz = near[(sgn[near] == 0).all(1)]
         if not len(allz):
@@ -357,9 +357,9 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     touch[rv] = True
     touch[n0:] = True
     fsg = sgn_all[T2]
-    pos_f, neg_f = (fsg > 0).any(1), (fsg < 0).any(1)
+    pos_f, neg_f = reduce_short(fsg > 0, "any"), reduce_short(fsg < 0, "any")
     label = np.where(pos_f & ~neg_f, 1, np.where(neg_f & ~pos_f, -1, 0))
-    label[~touch[T2].any(1)] = 0
+    label[~reduce_short(touch[T2], "any")] = 0
     chain_v = _chain_from_labels(T2, label, name)
     P = P.copy()
     old = chain_v < n0
@@ -549,7 +549,7 @@ def _split_hanging(P, T, C, uedges, new_id):
     k = np.minimum(a, b) * n + np.maximum(a, b)
     pos = np.clip(np.searchsorted(key, k), 0, len(key) - 1)
     hit = key[pos] == k
-    nhit = hit.sum(1)
+    nhit = reduce_short(hit, "sum")
     if not nhit.any():
         return T, C
     mid = np.where(hit, node[pos], -1)                    # node on side i (corner i -> i+1)

@@ -50,7 +50,7 @@ from scipy.spatial import cKDTree
 
 from .errors import ImprintError, LayoutError, SizeError
 from .imprint import _arc_param, _arc_point, _closest_on_segments, _sub_polyline
-from .mesh import ShellMesh, vertex_faces, norm_rows
+from .mesh import ShellMesh, vertex_faces, norm_rows, reduce_short
 from .section import Plane
 
 __all__ = ["MemberInfo", "member_infos", "build_members", "member_statistics", "triangulate_planar",
@@ -299,13 +299,13 @@ def _smooth_2d(x: np.ndarray, tris: np.ndarray, seg: np.ndarray, n_fixed: int, i
             y = np.where(ok[:, None], xn, x)
             ay = np.where(_cross2(y, T) > 0, _tri_min_angles(y, T), -1.0)
             worse = ay < np.minimum(a0, 90.0) - 1e-9
-            bad = np.unique(T[worse & ok[T].any(1)]) if worse.any() else np.zeros(0, np.int64)
+            bad = np.unique(T[worse & reduce_short(ok[T], "any")]) if worse.any() else np.zeros(0, np.int64)
             # a triangle got worse than it was: refuse the moves of its free corners unless the
             # triangle's new angle is still above every old star minimum of them
             if not len(bad):
                 break
             s_bad = np.zeros(len(x), bool)
-            tri_bad = worse & ok[T].any(1) & (ay < s0[T].min(1) + 1e-9)
+            tri_bad = worse & reduce_short(ok[T], "any") & (ay < reduce_short(s0[T], "min") + 1e-9)
             if not tri_bad.any():
                 break
             s_bad[T[tri_bad].ravel()] = True
@@ -368,7 +368,7 @@ def _strip_width(x: np.ndarray, seg: np.ndarray, tris: np.ndarray, step: float =
     s = np.repeat(np.arange(len(seg)), k)
     t = (np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)) / k[s]
     samples = np.vstack([a[s] + t[:, None] * (b[s] - a[s]), b])
-    q = np.vstack([x[tris].mean(1)] + [0.5 * (x[tris[:, i]] + x[tris[:, (i + 1) % 3]]) for i in range(3)])
+    q = np.vstack([reduce_short(x[tris], "mean")] + [0.5 * (x[tris[:, i]] + x[tris[:, (i + 1) % 3]]) for i in range(3)])
     return float(cKDTree(samples).query(q)[0].max()) + 0.5 * step
 
 
@@ -412,7 +412,7 @@ def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_an
     opts = f"rpYYq{float(min_angle):.6f}aQ"
     for _ in range(rounds):
         tris = np.asarray(t["triangles"], np.int64)
-        h = sizing(np.asarray(t["vertices"])[tris].mean(1))
+        h = sizing(reduce_short(np.asarray(t["vertices"])[tris], "mean"))
         n_before = len(t["vertices"])
         t = tr.triangulate({"vertices": t["vertices"], "segments": t["segments"], "triangles": tris,
                             "triangle_max_area": _EQ_AREA * h * h}, opts)

@@ -31,7 +31,7 @@ from . import kernels as _k
 from .errors import MeshValidationError
 
 __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces",
-           "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows"]
+           "cross_rows", "reduce_short", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows"]
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -56,6 +56,44 @@ def bbox_diagonal(P) -> float:
     the same values)."""
     ext = np.array([P[:, d].max() - P[:, d].min() for d in range(3)])
     return float(np.linalg.norm(ext))
+
+
+def _short_axis(a, axis, op, cast=None):
+    a = np.asarray(a)
+    axis = axis % a.ndim
+    m = a.shape[axis]
+    if m == 0:
+        return None
+    lead = (slice(None),) * axis
+    out = a[lead + (0,)]
+    out = out.astype(cast) if cast is not None else out.copy()
+    for j in range(1, m):
+        b = a[lead + (j,)]
+        op(out, b if cast is None else b.astype(cast), out=out)
+    return out
+
+
+def reduce_short(a, how: str, axis: int = 1) -> np.ndarray:
+    """``a.sum(axis)`` (``how="sum"``; also ``"mean"``, ``"min"``, ``"max"``, ``"any"``,
+    ``"all"``) over a SHORT axis (a triangle's 3 corners, a quad's 4, a vector's 3
+    coordinates), the same values bit for bit, as one elementwise operation per entry of that
+    axis: NumPy's reduction over a short axis costs 5 to 20 times more (it loops per row).
+    NumPy sums a short axis left to right, as this does; a mean is that sum over the count;
+    min and max propagate NaN as NumPy's do; a sum of booleans counts them."""
+    a = np.asarray(a)
+    if how in ("sum", "mean"):
+        cast = np.int64 if a.dtype == np.bool_ else None
+        out = _short_axis(a, axis, np.add, cast)
+        if out is None:
+            return a.mean(axis) if how == "mean" else a.sum(axis)
+        return out / a.shape[axis] if how == "mean" else out
+    op = {"min": np.minimum, "max": np.maximum, "any": np.logical_or, "all": np.logical_and}[how]
+    if how in ("any", "all") and a.dtype != np.bool_:
+        a = a != 0
+    out = _short_axis(a, axis, op)
+    if out is None:
+        return getattr(a, how)(axis)
+    return out
 
 
 def norm_rows(a, axis: int = -1, keepdims: bool = False) -> np.ndarray:

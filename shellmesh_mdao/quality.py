@@ -45,7 +45,7 @@ import math
 import numpy as np
 
 from .errors import MeshValidationError
-from .mesh import ShellMesh
+from .mesh import ShellMesh, reduce_short
 
 __all__ = [
     "METRICS", "ACCEPTANCE", "QUAD_ANGLE_RANGE",
@@ -230,7 +230,7 @@ def _corners(points, faces):
     corner 0 in slot 4), and the (m,) triangle mask."""
     pts, f = _arrays(points, faces)
     if len(f):
-        finite = np.isfinite(pts).all(1)
+        finite = reduce_short(np.isfinite(pts), "all")
         if not finite[f[:, :3]].all() or not finite[f[f[:, 3] >= 0, 3]].all():
             raise MeshValidationError("a face uses a node with NaN/inf coordinates; repair the input "
                                       "(ShellMesh.check() lists the nodes) before measuring quality")

@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, SizeError
 from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, edge_table, facing_ok, flip_tests,
                       greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
-from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
+from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
 __all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION",
@@ -800,7 +800,7 @@ class _Work:
             o = np.lexsort((fe_chain, fe[:, 1], fe[:, 0]))
             fe, fe_chain = fe[o], fe_chain[o]
             u = np.ones(len(fe), bool)
-            u[1:] = (fe[1:] != fe[:-1]).any(1)
+            u[1:] = (fe[1:, 0] != fe[:-1, 0]) | (fe[1:, 1] != fe[:-1, 1])
             fe, fe_chain = fe[u], fe_chain[u]
         self.fe = fe
         self.fe_chain = fe_chain
@@ -849,7 +849,7 @@ class _Work:
             setattr(self, name, getattr(self, name)[keep])
         self.F = o2n[self.F]
         fe = self.fe
-        ok = keep[fe].all(1) if len(fe) else np.zeros(0, bool)
+        ok = keep[fe[:, 0]] & keep[fe[:, 1]] if len(fe) else np.zeros(0, bool)
         self.set_features(o2n[fe[ok]], self.fe_chain[ok])
         self.touched()
         return o2n
@@ -1211,7 +1211,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         # an edge at a vertex to be removed may only remove that vertex
         dir_ok[:, 0] &= ~(rf[v] & ~rf[u])
         dir_ok[:, 1] &= ~(rf[u] & ~rf[v])
-    alive = dir_ok.any(1)
+    alive = dir_ok[:, 0] | dir_ok[:, 1]
     if not alive.any():
         return 0
     fn_old = _unit(_tri_normals(P, F))
@@ -1477,7 +1477,7 @@ def _relax(W, ctx, lam=1.0, move_chains=True, movable=None, min_angle_floor=10.0
     n = W.n
     An = _tri_normals(P, F)
     area = _norm(An)
-    C = P[F].mean(1)
+    C = (P[F[:, 0]] + P[F[:, 1]] + P[F[:, 2]]) / 3          # P[F].mean(1), the same bits
     wsum = np.zeros(n)
     acc = np.zeros((n, 3))
     for k in range(3):
@@ -1544,7 +1544,7 @@ def _accept_moves(W, ctx, newP, newtri, newS, moved, An_old, area_old, max_turn=
     reg = W.kind == _REGULAR
     amin_old = _tri_min_angle(P[F[:, 0]], P[F[:, 1]], P[F[:, 2]])
     for _ in range(100):
-        fm = moved[F].any(1)
+        fm = reduce_short(moved[F], "any")
         fi = np.flatnonzero(fm)
         if not len(fi):
             break
@@ -1660,7 +1660,7 @@ def _cleanup_round(W, ctx, bad_angle=20.0):
     F = W.F
     P = W.P
     A = _tri_angles(P, F)
-    bad = np.flatnonzero(A.min(1) < bad_angle)
+    bad = np.flatnonzero(reduce_short(A, "min") < bad_angle)
     if not len(bad):
         return 0
     # the shortest side is opposite the smallest angle
@@ -1716,7 +1716,7 @@ def _deviation(W, ctx):
     E = T.E
     mid = 0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]])
     _, _, dm = ctx.loc.closest(mid)
-    C = W.P[W.F].mean(1)
+    C = (W.P[W.F[:, 0]] + W.P[W.F[:, 1]] + W.P[W.F[:, 2]]) / 3
     fn = W.face_normals()
     cp, ctri, ok = ctx.project(C, fn, W.fpatch)
     dc = _norm(cp - C)

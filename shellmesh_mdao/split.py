@@ -35,7 +35,7 @@ import numpy as np
 from scipy import sparse
 
 from .errors import MeshValidationError, ProjectionError, SolverError
-from .mesh import ShellMesh, norm_rows
+from .mesh import ShellMesh, norm_rows, reduce_short
 
 __all__ = ["SplitOptions", "SplitResult", "SplitLP", "split_options", "polygon_energy", "split_energy",
            "build_split_lp", "split_polygons", "N_OPTIONS", "TRI", "QUAD"]
@@ -170,11 +170,11 @@ def polygon_energy(corners, is_tri, c1: float = 1.0, c2: float = 1.0, form: str 
     L = norm_rows(d, axis=2)
     n = np.where(tri, 3.0, 4.0)
     Lm = np.where(valid, L, 0.0)
-    lavg = Lm.sum(1) / n
-    degenerate = ((L <= 0) & valid).any(1) | ~(lavg > 0)
+    lavg = reduce_short(Lm, "sum") / n
+    degenerate = reduce_short((L <= 0) & valid, "any") | ~(lavg > 0)
     with np.errstate(invalid="ignore", divide="ignore"):
         u = -d[rows, prv]                            # corner i -> previous corner
-        cosang = (u * d).sum(2) / (L[rows, prv] * L)
+        cosang = reduce_short(u * d, "sum", axis=2) / (L[rows, prv] * L)
         ang = np.arccos(np.clip(cosang, -1.0, 1.0))
         ratio = L / lavg[:, None]
     ref = np.where(tri, np.pi / 3, np.pi / 2)[:, None]
@@ -187,7 +187,7 @@ def polygon_energy(corners, is_tri, c1: float = 1.0, c2: float = 1.0, form: str 
         tl, ta = ratio, aratio
     else:
         raise ValueError(f"unknown energy form {form!r}: use 'squared', 'abs' or 'literal'")
-    e = c1 * np.where(valid, tl, 0.0).sum(1) + c2 * np.where(valid, ta, 0.0).sum(1)
+    e = c1 * reduce_short(np.where(valid, tl, 0.0), "sum") + c2 * reduce_short(np.where(valid, ta, 0.0), "sum")
     return np.where(degenerate | ~np.isfinite(e), _BIG, e)
 
 
@@ -198,7 +198,7 @@ def _local_coords(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     C = points[f]
     nxt = np.where(tri[:, None], np.array([1, 2, 0, 0]), np.array([1, 2, 3, 0]))
     M = 0.5 * (C + C[np.arange(len(f))[:, None], nxt])
-    cen = np.where(tri[:, None], C[:, :3].mean(1), C.mean(1))
+    cen = np.where(tri[:, None], reduce_short(C[:, :3], "mean"), reduce_short(C, "mean"))
     return np.concatenate([C, M, cen[:, None]], axis=1)
 
 
