@@ -437,7 +437,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
         raise ValueError(f"planarize needs iterations >= 1 and rings >= 1, got {iterations!r} and {rings!r}")
     P, F = mesh.points, mesh.faces
     quad = ~mesh.is_tri
-    q0 = element_quality(P, F)
+    q0 = element_quality(P, F, ("warp", "scaled_jacobian"))
     w0 = q0["warp"]
     warped = np.flatnonzero(quad & (w0 > warp_above))
     p99 = float(np.percentile(w0[quad], 99)) if quad.any() else 0.0
@@ -501,7 +501,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
         if aim > 0:
             # aim each quad's residual at its own scaled by aim / warp when it is warped more:
             # the quads already flatter than aim only hold on, the moves go where warp is
-            wc = element_quality(X, Q)["warp"]
+            wc = element_quality(X, Q, ("warp",))["warp"]
             b = b + (A @ t - b) * np.minimum(1.0, aim / np.maximum(wc, 1e-12))
         t, lam = _bounded_least_squares(A, b, regularisation / h ** 2, bound, start=start, ldl=ldl)
         start = (t, lam)             # the next round's problem is this one re-linearised
@@ -516,7 +516,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     for k in range(40):
         X = P.copy()
         X[cand] += t[:, None] * nu
-        sj = element_quality(X, Fa)["scaled_jacobian"]
+        sj = element_quality(X, Fa, ("scaled_jacobian",))["scaled_jacobian"]
         flip = np.einsum("ij,ij->i", _face_normals(X, Fa, Fa[:, 3] < 0), n0) <= 0
         bad = (sj < floor) | flip
         if not bad.any():
@@ -529,7 +529,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     else:
         return mesh, info
     w = w0.copy()
-    w[rq] = element_quality(X, F[rq])["warp"]            # no other face has a moved corner
+    w[rq] = element_quality(X, F[rq], ("warp",))["warp"]            # no other face has a moved corner
     above = int((quad & (w > warp_above)).sum())
     if above >= len(warped):
         return mesh, info

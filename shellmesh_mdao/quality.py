@@ -149,24 +149,27 @@ def _arrays(points, faces):
     return pts, f
 
 
-def _corner_terms(P: np.ndarray, n: np.ndarray):
+def _corner_terms(P: np.ndarray, n: np.ndarray, angles: bool = True):
     """Per-corner terms of polygons P (3, k, m) (component-first, corner-major) with unit
     normals n (3, m).
 
     Returns edge lengths L (k, m) with ``L[i] = |P_{i+1} - P_i|``, the corner angle
     (degrees; a corner with ``(e_next x e_prev) . n < 0`` is reflex and reads
-    ``360 - angle``), the corner scaled Jacobian ``(e_next x e_prev) . n / (|e_next||e_prev|)``
-    and ``s = (e_next x e_prev) . n`` (twice the signed corner-triangle area), each (k, m).
+    ``360 - angle``; None with ``angles=False``), the corner scaled Jacobian
+    ``(e_next x e_prev) . n / (|e_next||e_prev|)`` and ``s = (e_next x e_prev) . n`` (twice
+    the signed corner-triangle area), each (k, m).
     """
     E = np.roll(P, -1, axis=1) - P                  # E_i = P_{i+1} - P_i  (e_next at corner i)
     L = _norm(E)
     Eprev = np.roll(E, 1, axis=1)                   # E_{i-1} = P_i - P_{i-1} = -e_prev
     c = _cross(Eprev, E)                            # = e_next x e_prev
     s = _dot(c, n[:, None, :])
-    cn = _norm(c)
-    cosv = -_dot(E, Eprev)                          # e_next . e_prev
-    ang = np.degrees(np.arctan2(np.where(s < 0, -cn, cn), cosv))
-    ang = np.where(ang < 0, ang + 360.0, ang)
+    ang = None
+    if angles:
+        cn = _norm(c)
+        cosv = -_dot(E, Eprev)                      # e_next . e_prev
+        ang = np.degrees(np.arctan2(np.where(s < 0, -cn, cn), cosv))
+        ang = np.where(ang < 0, ang + 360.0, ang)
     sj = _div(s, L * np.roll(L, 1, axis=0), 0.0)
     return L, ang, sj, s
 
@@ -184,45 +187,63 @@ def _tri_normal(P: np.ndarray) -> np.ndarray:
     return _unit(_cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]))
 
 
-def _quad_metrics(P: np.ndarray) -> dict:
-    """All metrics of quads P (3, 4, mq)."""
+_CORNER_METRICS = ("aspect", "min_angle", "max_angle", "taper", "scaled_jacobian")
+
+
+def _quad_metrics(P: np.ndarray, want=METRICS) -> dict:
+    """The metrics ``want`` (default all) of quads P (3, 4, mq)."""
     P0, P1, P2, P3 = P[:, 0], P[:, 1], P[:, 2], P[:, 3]
-    n = _quad_normal(P)
-    L, ang, sj, s = _corner_terms(P, n)
-    out = {"aspect": _aspect_from_lengths(L), "min_angle": ang.min(0), "max_angle": ang.max(0)}
-    # skew: lines joining opposite edge midpoints, 2(M2 - M0) and 2(M3 - M1)
-    u = (P2 + P3) - (P0 + P1)
-    v = (P3 + P0) - (P1 + P2)
-    out["skew"] = 90.0 - _line_angle(u, v)
-    # warp: angle between the planes of the two triangles of each diagonal split
-    d02, d13 = P2 - P0, P3 - P1
-    w02 = _line_angle(_cross(P1 - P0, d02), _cross(d02, P3 - P0))      # (0,1,2) | (0,2,3)
-    w13 = _line_angle(_cross(d13, P0 - P1), _cross(P2 - P1, d13))      # (1,3,0) | (1,2,3)
-    out["warp"] = np.maximum(w02, w13)
-    # taper: corner-triangle signed areas A_i = s_i / 2
-    A = 0.5 * s
-    Aavg = 0.25 * (A[0] + A[1] + A[2] + A[3])
-    out["taper"] = np.where(Aavg > 0, 1.0 - _div(A.min(0), Aavg, 0.0), np.inf)
-    out["scaled_jacobian"] = sj.min(0)
-    return out
+    out = {}
+    if any(k in want for k in _CORNER_METRICS):
+        n = _quad_normal(P)
+        L, ang, sj, s = _corner_terms(P, n, angles="min_angle" in want or "max_angle" in want)
+        if "aspect" in want:
+            out["aspect"] = _aspect_from_lengths(L)
+        if ang is not None:
+            out["min_angle"], out["max_angle"] = ang.min(0), ang.max(0)
+    if "skew" in want:
+        # skew: lines joining opposite edge midpoints, 2(M2 - M0) and 2(M3 - M1)
+        u = (P2 + P3) - (P0 + P1)
+        v = (P3 + P0) - (P1 + P2)
+        out["skew"] = 90.0 - _line_angle(u, v)
+    if "warp" in want:
+        # warp: angle between the planes of the two triangles of each diagonal split
+        d02, d13 = P2 - P0, P3 - P1
+        w02 = _line_angle(_cross(P1 - P0, d02), _cross(d02, P3 - P0))      # (0,1,2) | (0,2,3)
+        w13 = _line_angle(_cross(d13, P0 - P1), _cross(P2 - P1, d13))      # (1,3,0) | (1,2,3)
+        out["warp"] = np.maximum(w02, w13)
+    if "taper" in want:
+        # taper: corner-triangle signed areas A_i = s_i / 2
+        A = 0.5 * s
+        Aavg = 0.25 * (A[0] + A[1] + A[2] + A[3])
+        out["taper"] = np.where(Aavg > 0, 1.0 - _div(A.min(0), Aavg, 0.0), np.inf)
+    if "scaled_jacobian" in want:
+        out["scaled_jacobian"] = sj.min(0)
+    return {k: out[k] for k in want}
 
 
-def _tri_metrics(P: np.ndarray) -> dict:
-    """All metrics of triangles P (3, 3, mt)."""
-    n = _tri_normal(P)
-    L, ang, sj, _ = _corner_terms(P, n)
+def _tri_metrics(P: np.ndarray, want=METRICS) -> dict:
+    """The metrics ``want`` (default all) of triangles P (3, 3, mt)."""
     m = P.shape[2]
-    out = {"aspect": _aspect_from_lengths(L), "min_angle": ang.min(0), "max_angle": ang.max(0)}
-    # skew: at corner k, the median (corner -> midpoint of the opposite edge) against the
-    # line joining the midpoints of the two adjacent edges (parallel to the opposite edge)
-    Pn, Pp = np.roll(P, -1, axis=1), np.roll(P, 1, axis=1)
-    med = 0.5 * (Pn + Pp) - P
-    mid = Pp - Pn
-    out["skew"] = 90.0 - _line_angle(med, mid).min(0)
+    out = {}
+    if any(k in want for k in _CORNER_METRICS):
+        n = _tri_normal(P)
+        L, ang, sj, _ = _corner_terms(P, n, angles="min_angle" in want or "max_angle" in want)
+        if "aspect" in want:
+            out["aspect"] = _aspect_from_lengths(L)
+        if ang is not None:
+            out["min_angle"], out["max_angle"] = ang.min(0), ang.max(0)
+        out["scaled_jacobian"] = _TRI_SJ_SCALE * sj.min(0)
+    if "skew" in want:
+        # skew: at corner k, the median (corner -> midpoint of the opposite edge) against the
+        # line joining the midpoints of the two adjacent edges (parallel to the opposite edge)
+        Pn, Pp = np.roll(P, -1, axis=1), np.roll(P, 1, axis=1)
+        med = 0.5 * (Pn + Pp) - P
+        mid = Pp - Pn
+        out["skew"] = 90.0 - _line_angle(med, mid).min(0)
     out["warp"] = np.zeros(m)
     out["taper"] = np.zeros(m)
-    out["scaled_jacobian"] = _TRI_SJ_SCALE * sj.min(0)
-    return out
+    return {k: out[k] for k in want}
 
 
 def _corners(points, faces):
@@ -242,8 +263,10 @@ def _corners(points, faces):
 
 
 # ---------------------------------------------------------------------------- public API
-def element_quality(points, faces=None) -> dict[str, np.ndarray]:
-    """All quality metrics of every element, as (m,) float64 arrays aligned with ``faces``.
+def element_quality(points, faces=None, metrics=None) -> dict[str, np.ndarray]:
+    """All quality metrics of every element, as (m,) float64 arrays aligned with ``faces``
+    (``metrics``: a sequence of the keys to compute, default all; the others are skipped,
+    the ones computed have the same values).
 
     ``points`` (n, 3) and ``faces`` (m, 4) (``-1`` in slot 4 for triangles) or (m, 3);
     or a :class:`ShellMesh` as the only argument. Keys: ``aspect``, ``min_angle``,
@@ -252,18 +275,22 @@ def element_quality(points, faces=None) -> dict[str, np.ndarray]:
     ``taper = inf`` (zero area) and ``scaled_jacobian = 0``; no metric is NaN.
     Raises :class:`MeshValidationError` for malformed arrays or NaN/inf coordinates.
     """
+    want = METRICS if metrics is None else tuple(metrics)
+    unknown = [k for k in want if k not in METRICS]
+    if unknown:
+        raise ValueError(f"unknown quality metric(s) {unknown}; the metrics are {', '.join(METRICS)}")
     P4, is_tri = _corners(points, faces)
     m = P4.shape[2]
     q = np.flatnonzero(~is_tri)
     t = np.flatnonzero(is_tri)
     if len(t) == 0:                       # all quads: no gather/scatter needed
-        return _quad_metrics(P4)
+        return _quad_metrics(P4, want)
     if len(q) == 0:
-        return _tri_metrics(P4[:, :3])
-    out = {k: np.empty(m, dtype=np.float64) for k in METRICS}
-    for k, v in _quad_metrics(P4[:, :, q]).items():
+        return _tri_metrics(P4[:, :3], want)
+    out = {k: np.empty(m, dtype=np.float64) for k in want}
+    for k, v in _quad_metrics(P4[:, :, q], want).items():
         out[k][q] = v
-    for k, v in _tri_metrics(P4[:, :3, t]).items():
+    for k, v in _tri_metrics(P4[:, :3, t], want).items():
         out[k][t] = v
     return out
 
@@ -275,7 +302,7 @@ def mesh_quality(mesh: ShellMesh) -> dict[str, np.ndarray]:
 
 def aspect_ratio(points, faces=None) -> np.ndarray:
     """(m,) longest edge / shortest edge (``inf`` for a zero-length edge)."""
-    return element_quality(points, faces)["aspect"]
+    return element_quality(points, faces, ("aspect",))["aspect"]
 
 
 def interior_angles(points, faces=None) -> np.ndarray:
@@ -307,22 +334,22 @@ def min_max_angles(points, faces=None) -> tuple[np.ndarray, np.ndarray]:
 
 def skew(points, faces=None) -> np.ndarray:
     """(m,) skew angle in degrees (0 ideal, 90 worst); see the module docstring."""
-    return element_quality(points, faces)["skew"]
+    return element_quality(points, faces, ("skew",))["skew"]
 
 
 def warp(points, faces=None) -> np.ndarray:
     """(m,) warp angle in degrees (0 flat; 0 for triangles)."""
-    return element_quality(points, faces)["warp"]
+    return element_quality(points, faces, ("warp",))["warp"]
 
 
 def taper(points, faces=None) -> np.ndarray:
     """(m,) taper ratio ``1 - min A_i / mean A_i`` of the corner triangles (0 for triangles)."""
-    return element_quality(points, faces)["taper"]
+    return element_quality(points, faces, ("taper",))["taper"]
 
 
 def scaled_jacobian(points, faces=None) -> np.ndarray:
     """(m,) scaled Jacobian (1 ideal; ``<= 0`` folded, non-convex or degenerate)."""
-    return element_quality(points, faces)["scaled_jacobian"]
+    return element_quality(points, faces, ("scaled_jacobian",))["scaled_jacobian"]
 
 
 def _in_range(v: np.ndarray, rng) -> np.ndarray:

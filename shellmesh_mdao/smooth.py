@@ -811,7 +811,7 @@ def mesh_figures(mesh: ShellMesh, supports: Supports | None = None, size: float 
     from .quality import element_quality
     if not mesh.n_faces:
         return {}
-    q = element_quality(mesh.points, mesh.faces)
+    q = element_quality(mesh.points, mesh.faces, ("min_angle", "max_angle", "warp", "scaled_jacobian"))
     sj = q["scaled_jacobian"]
     quad = mesh.is_quad
     ok = quad & (q["min_angle"] >= 45.0) & (q["max_angle"] <= 135.0)
