@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import chain_walk, corner_cosines, greedy_independent, stable_pair_order
+from .kernels import chain_walk, corner_cosines, greedy_independent, segments_scan, stable_pair_order
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
@@ -56,6 +56,10 @@ class ChainSpec:
 
 #: snap distance a cut is redone at when a larger one misses a crossing (:func:`imprint_chains`)
 SNAP_FALLBACK = 0.25
+#: closest points on polylines: up to this many query-segment pairs every query scans every
+#: segment in a compiled loop; above, a KD-tree of segment midpoints picks candidates (the same
+#: points either way)
+SCAN_WORK = 2_000_000
 
 
 @dataclass
@@ -81,13 +85,15 @@ def closest_on_polyline(q: np.ndarray, poly: np.ndarray, closed: bool = False) -
 
 def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs, params: bool = False):
     """Closest point of each query ``q[i]`` on the arc ``arcs[cid[i]]``: the same points, bit
-    for bit, as :func:`closest_on_polyline` arc by arc, in one query. The segment midpoints
+    for bit, as :func:`closest_on_polyline` arc by arc, in one query. Up to
+    :data:`SCAN_WORK` query-segment pairs, one compiled loop scans every segment of each
+    query's arc (:func:`~shellmesh_mdao.kernels.segments_scan`). Above, the segment midpoints
     of all arcs go in one KD-tree with the arc's index times a separation far larger than
     the model as a fourth coordinate, so a query meets only its own arc's segments (at their
     plain distance); its candidates lie within the nearest midpoint's distance plus half its
     arc's longest segment, as in :func:`_closest_on_segments`, and the nearest candidate wins
-    (ties: the lowest segment). ``params``: also return each point's arc length from its
-    arc's first point."""
+    (ties: the lowest segment), as in the scan. ``params``: also return each point's arc
+    length from its arc's first point."""
     q = np.asarray(q, float).reshape(-1, 3)
     cid = np.asarray(cid, np.int64)
     ids = np.unique(cid)
@@ -100,12 +106,28 @@ def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs, params: bool = False)
     ab = b - a
     L = norm_rows(ab, axis=1)
     seg_arc = np.repeat(np.arange(len(ids)), nseg)
-    Lmax = np.zeros(len(ids))
+    first = np.concatenate([[0], np.cumsum(nseg)[:-1]])
+    qa = pos[cid]
+    if int(nseg[qa].sum()) <= SCAN_WORK:
+        # each query against every segment of its own arc in one compiled loop (the same pick
+        # over a set that holds the KD-tree's candidates)
+        x, _, seg, t = segments_scan(q, first[qa], first[qa] + nseg[qa], a, ab)
+    else:
+        x, seg, t = _closest_on_arcs_tree(q, qa, a, b, ab, L, seg_arc, len(ids))
+    if not params:
+        return x
+    cum = np.concatenate([[0.0], np.cumsum(L)])
+    return x, cum[seg] - cum[first[seg_arc[seg]]] + t * L[seg]
+
+
+def _closest_on_arcs_tree(q, qa, a, b, ab, L, seg_arc, narcs):
+    """:func:`_closest_on_arcs`' pick through one KD-tree of the segment midpoints of all arcs
+    (for large inputs): ``(points, segments, t)``."""
+    Lmax = np.zeros(narcs)
     np.maximum.at(Lmax, seg_arc, L)
     mid = 0.5 * (a + b)
     sep = 1e3 * (float(np.abs(mid).max()) + float(np.abs(q).max()) + float(L.max()) + 1.0)
     tree = cKDTree(np.column_stack([mid, seg_arc * sep]))
-    qa = pos[cid]
     q4 = np.column_stack([q, qa * sep])
     d0, _ = tree.query(q4)
     cand = tree.query_ball_point(q4, d0 + 0.5 * Lmax[qa] + 1e-300)
@@ -114,11 +136,7 @@ def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs, params: bool = False)
     si = np.concatenate([np.asarray(c, np.int64) for c in cand])
     keep = seg_arc[si] == qa[qi]
     x, _, seg, t = _pick_segments(q, qi[keep], si[keep], a, ab)
-    if not params:
-        return x
-    cum = np.concatenate([[0.0], np.cumsum(L)])
-    first = np.concatenate([[0], np.cumsum(nseg)[:-1]])
-    return x, cum[seg] - cum[first[seg_arc[seg]]] + t * L[seg]
+    return x, seg, t
 
 
 def _tri_angles_min(P, T):
@@ -1901,11 +1919,17 @@ def _skin_roles(n, fe, fid, fixed, chain_vs, arcs):
 
 def _closest_on_segments(q, a, b, full: bool = False):
     """Closest points on a set of segments a-b (s, 3) to query points q (n, 3), and their
-    distances (KD-tree of segment midpoints with a conservative candidate radius); with
+    distances (every segment scanned by a compiled loop up to :data:`SCAN_WORK` pairs, else a
+    KD-tree of segment midpoints with a conservative candidate radius: the same points); with
     ``full``, also the segment of each closest point and its parameter along it (ties: the
     lowest segment)."""
     q = np.atleast_2d(q)
     ab = b - a
+    if len(q) * len(a) <= SCAN_WORK:
+        # every query against every segment in one compiled loop: the same pick (the nearest
+        # candidate, the lowest segment among equals) over a set that holds the KD-tree's
+        x, dist, si, t = segments_scan(q, np.zeros(len(q), np.int64), np.full(len(q), len(a)), a, ab)
+        return (x, dist, si, t) if full else (x, dist)
     L = norm_rows(ab, axis=1)
     tree = cKDTree(0.5 * (a + b))
     d0, _ = tree.query(q)

@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "ReducedHessian", "chain_walk", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
+           "ortho_gradient", "ReducedHessian", "chain_walk", "segments_scan", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
            "stable_pair_order", "edge_table", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -1423,6 +1423,58 @@ class TriangleBVH:
         return out, oid
 
 
+# ============================================================================ segments
+@njit(cache=True, nogil=True)
+def _segments_scan(q, lo, hi, a, ab):
+    m = q.shape[0]
+    x = np.empty((m, 3))
+    dist = np.empty(m)
+    seg = np.empty(m, np.int64)
+    tt = np.empty(m)
+    for i in range(m):
+        q0, q1, q2 = q[i, 0], q[i, 1], q[i, 2]
+        bs = -1
+        bd = np.inf
+        bt = 0.0
+        b0 = b1 = b2 = 0.0
+        for s in range(lo[i], hi[i]):
+            a0, a1, a2 = a[s, 0], a[s, 1], a[s, 2]
+            e0, e1, e2 = ab[s, 0], ab[s, 1], ab[s, 2]
+            L2 = _dot3e(e0, e1, e2, e0, e1, e2)
+            t = _dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0)
+            t = _clip01(t)
+            x0, x1, x2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
+            d0, d1, d2 = x0 - q0, x1 - q1, x2 - q2
+            d = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            # the nearest, the lowest segment among equals; NaN distances last (np.lexsort)
+            if bs < 0 or d < bd or (bd != bd and d == d):
+                bs, bd, bt = s, d, t
+                b0, b1, b2 = x0, x1, x2
+        x[i, 0], x[i, 1], x[i, 2] = b0, b1, b2
+        dist[i] = bd
+        seg[i] = bs
+        tt[i] = bt
+    return x, dist, seg, tt
+
+
+def segments_scan(q, lo, hi, a, ab):
+    """The closest point to each query ``q[i]`` on the segments ``a[s] + t ab[s]``,
+    ``lo[i] <= s < hi[i]`` (a non-empty range), scanning them all: ``(points, distances,
+    segments, t)``, the nearest segment and the lowest among equally near ones, with
+    numpy's arithmetic of ``imprint._pick_segments`` (einsum's dot products, ``np.clip``,
+    row norms), so the same bits as that pick over any candidate set holding the nearest."""
+    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    ab = np.ascontiguousarray(ab, dtype=np.float64).reshape(-1, 3)
+    lo = np.ascontiguousarray(lo, dtype=np.int64).reshape(-1)
+    hi = np.ascontiguousarray(hi, dtype=np.int64).reshape(-1)
+    if len(a) != len(ab) or len(lo) != len(q) or len(hi) != len(q):
+        raise ValueError("segments_scan needs one a and one ab per segment and one range per query")
+    if len(q) and ((lo < 0).any() or (hi > len(a)).any() or (hi <= lo).any()):
+        raise ValueError(f"segment ranges must be non-empty and lie in [0, {len(a)}]")
+    return _segments_scan(q, lo, hi, a, ab)
+
+
 # ============================================================================ rows of three
 # The per-row vector formulas of the remesh, the imprint and the smoother, called thousands of
 # times a run on a few hundred to a few thousand rows, where numpy's per-call overhead and
@@ -1957,6 +2009,7 @@ def warm_up() -> float:
                    np.ones(1), np.ones(1), np.array([0, 2, 4]), np.array([2, 2, 0]), np.eye(3)[[0, 1, 0, 1]])
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
     chain_walk(np.array([[0, 1], [0, 2], [1, 2], [2, 3]]), 4)
+    segments_scan(np.zeros((1, 3)), [0], [1], np.zeros((1, 3)), np.ones((1, 3)))
     rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),
                         np.array([2, 2, 1, 0]), np.array([0, 2, 4, 5]))
     rh.values(np.eye(3)[[0, 1, 0, 1, 2]], np.ones(4), np.ones(5),

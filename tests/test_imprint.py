@@ -482,3 +482,40 @@ def test_flip_round_edge_tables_match_the_unique_and_isin_formulas():
     assert np.array_equal(_in_sorted(x, ks[start]), np.isin(x, ks))
     assert np.array_equal(_in_sorted(x, np.sort(x[:7])), np.isin(x, x[:7]))
     assert not _in_sorted(x, np.zeros(0, np.int64)).any()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_segment_scan_and_kd_tree_give_the_same_closest_points(seed, monkeypatch):
+    """Closest points on polylines and arcs: the compiled scan of every segment and the KD-tree
+    of segment midpoints (large inputs) give the same points, segments and parameters bit for
+    bit, on arcs with zero-length segments, repeated points and queries equally near two
+    segments (the lowest wins)."""
+    from shellmesh_mdao import imprint as imp
+    rng = np.random.default_rng(500 + seed)
+
+    class Arc:
+        def __init__(self, points, closed):
+            self.points, self.closed = points, closed
+
+    arcs = []
+    for k in range(5):
+        pts = np.cumsum(rng.normal(size=(int(rng.integers(2, 60)), 3)), axis=0)
+        pts[len(pts) // 2] = pts[len(pts) // 2 - 1]                    # a zero-length segment
+        arcs.append(Arc(pts, bool(k % 2)))
+    sym = Arc(np.array([[-1.0, 0, 0], [0, 0, 0], [1.0, 0, 0], [1.0, 1, 0], [-1.0, 1, 0]]), False)
+    arcs.append(sym)                                                   # (0, 0.5, 0): two nearest segments
+    cid = rng.integers(0, len(arcs), 400)
+    cid[:3] = len(arcs) - 1
+    q = np.vstack([a.points.mean(0) for a in arcs])[cid] + rng.normal(size=(400, 3)) * 3
+    q[:3] = [[0.0, 0.5, 0], [-1.0, 0.5, 0], [0.0, 0.5, 0.3]]
+    got = [imp._closest_on_arcs(q, cid, arcs, params=True)]
+    got += [imp._closest_on_segments(q, arcs[0].points[:-1], arcs[0].points[1:], full=True)]
+    monkeypatch.setattr(imp, "SCAN_WORK", 0)
+    ref = [imp._closest_on_arcs(q, cid, arcs, params=True)]
+    ref += [imp._closest_on_segments(q, arcs[0].points[:-1], arcs[0].points[1:], full=True)]
+    for g, r in zip(got, ref):
+        for x, y in zip(g, r):
+            assert x.tobytes() == y.tobytes()
+    # the query equally near three segments of the symmetric arc takes the first: the end of
+    # segment 0 (arc length 1), not the middle of segment 3
+    assert got[0][1][0] == 1.0 and np.array_equal(got[0][0][0], [0.0, 0.0, 0.0])
