@@ -1911,10 +1911,19 @@ def corner_sin_cos(A, B, C):
     ``u . v`` at corner A (u = B - A, v = C - A) and at corner B (u = C - B, v = A - B), with
     the bits of ``norm(cross_rows(u, v))`` and ``einsum("ij,ij->i", u, v)`` (the arguments of
     the remesh's ``arctan2`` angles)."""
-    A, B, C = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (A, B, C))
+    A, B, C = (_rows3_any(x) for x in (A, B, C))
     if not (len(A) == len(B) == len(C)):
         raise ValueError("corner_sin_cos takes three (k, 3) arrays of the same length")
     return _corner_sin_cos(A, B, C)
+
+
+def _rows3_any(x):
+    """``x`` as (k, 3) float64 rows without a copy where it already is one, strided or not (the
+    corners ``Q[:, j]`` of a (k, 3, 3) array): the compiled loops read any strides."""
+    x = np.asarray(x)
+    if x.dtype != np.float64 or x.ndim != 2 or x.shape[1] != 3:
+        x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
+    return x
 
 
 def corner_cosines(X):
@@ -2031,6 +2040,8 @@ def warm_up() -> float:
     dot_unit_rows(e)
     triangle_normals(e, np.array([[0, 1, 2]]))
     corner_sin_cos(e[:1], e[1:2], e[2:])
+    Q = np.zeros((2, 3, 3))
+    corner_sin_cos(Q[:, 0], Q[:, 1], Q[:, 2])           # the strided corners of a (k, 3, 3) array
     corner_cosines(e[None])
     facing_ok(np.array([[0, 1, 2]]), np.zeros(3, np.int64), np.zeros(3, np.int64), e, e[:1], 0.5)
     CollapseTests(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]), np.zeros(3, np.int64),
