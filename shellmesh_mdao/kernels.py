@@ -31,7 +31,7 @@ from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "ReducedHessian", "chain_walk", "segments_scan", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
-           "stable_pair_order", "edge_table", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
+           "stable_pair_order", "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
 
@@ -1074,6 +1074,34 @@ def edge_table(F, n):
     return _edge_table(F, int(n))
 
 
+@njit(cache=True, nogil=True)
+def _edge_lookup(E, kptr, u, v):
+    out = np.empty(u.shape[0], np.int64)
+    for i in range(u.shape[0]):
+        lo, hi = (u[i], v[i]) if u[i] <= v[i] else (v[i], u[i])
+        out[i] = -1
+        for e in range(kptr[lo], kptr[lo + 1]):
+            if E[e, 1] == hi:
+                out[i] = e
+                break
+    return out
+
+
+def edge_lookup(E, kptr, u, v):
+    """Edge id of each node pair ``(u[i], v[i])`` (either order), -1 where absent, in the edge
+    table ``E`` (e, 2) of :func:`edge_table` (rows ``(lo, hi)`` sorted): ``kptr`` (n + 1,) the
+    rows of each ``lo`` (``E[kptr[lo]:kptr[lo + 1]]``); a scan of those few rows."""
+    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
+    kptr = np.ascontiguousarray(kptr, dtype=np.int64)
+    u = np.ascontiguousarray(u, dtype=np.int64).reshape(-1)
+    v = np.ascontiguousarray(v, dtype=np.int64).reshape(-1)
+    if len(u) != len(v):
+        raise ValueError("edge_lookup needs as many u as v")
+    _check_index("u", u, len(kptr) - 1)
+    _check_index("v", v, len(kptr) - 1)
+    return _edge_lookup(E, kptr, u, v)
+
+
 # ============================================================================ triangles
 @njit(cache=True, nogil=True, inline="always")
 def _dot3(x0, x1, x2, y0, y1, y2):
@@ -2049,4 +2077,5 @@ def warm_up() -> float:
                   e, 0.2)(np.array([0]), np.array([1]), np.array([True]))
     flip_tests([0], [1], [2], [0], e, 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64), e, 0.2)
     edge_table(np.array([[0, 1, 2]]), 3)
+    edge_lookup(np.array([[0, 1], [0, 2], [1, 2]]), np.array([0, 2, 3, 3]), np.array([0, 2]), np.array([1, 1]))
     return time.perf_counter() - t0

@@ -38,8 +38,8 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, edge_table, facing_ok, flip_tests,
-                      greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
+from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, edge_lookup, edge_table, facing_ok,
+                      flip_tests, greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -148,16 +148,15 @@ class _Topo:
         self.m = m
         self._vn = None
         self._vf = None
+        self._kptr = None
 
     def lookup(self, u, v):
-        """Edge id of node pairs (u, v), -1 where absent."""
-        lo = np.minimum(u, v)
-        hi = np.maximum(u, v)
-        q = lo * self.n + hi
-        if not len(self.keys):
-            return np.full(len(q), -1, dtype=np.int64)
-        pos = np.minimum(np.searchsorted(self.keys, q), len(self.keys) - 1)
-        return np.where(self.keys[pos] == q, pos, -1)
+        """Edge id of node pairs (u, v), -1 where absent (a compiled scan of the few edges
+        whose lower end is ``min(u, v)``: :func:`~shellmesh_mdao.kernels.edge_lookup`)."""
+        if self._kptr is None:
+            # E's rows are sorted by key lo * n + hi, so by lo: each lo's rows are one run
+            self._kptr = np.concatenate([[0], np.cumsum(np.bincount(self.E[:, 0], minlength=self.n))])
+        return edge_lookup(self.E, self._kptr, np.asarray(u).reshape(-1), np.asarray(v).reshape(-1))
 
     def vertex_neighbors(self):
         """CSR (ptr, nbr) of vertex neighbours."""

@@ -885,3 +885,22 @@ def test_edge_table_matches_the_sorted_key_runs(seed):
     assert {1, 2}.issubset(set(cnt.tolist())) and cnt.max() > 2
     with pytest.raises(ValueError):
         edge_table(F, 10)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_edge_lookup_matches_the_sorted_keys(seed):
+    """edge_lookup (a scan of the few edges of each lower end) gives the edge ids the sorted
+    key search gave, -1 for absent pairs, in either order of the ends."""
+    from shellmesh_mdao.kernels import edge_lookup, edge_table
+    rng = np.random.default_rng(30 + seed)
+    n = 200
+    F = np.array([rng.choice(n, 3, replace=False) for _ in range(300)])
+    E, keys = edge_table(F, n)[4], edge_table(F, n)[5]
+    kptr = np.concatenate([[0], np.cumsum(np.bincount(E[:, 0], minlength=n))])
+    u, v = rng.integers(0, n, 5000), rng.integers(0, n, 5000)
+    u[:len(E)], v[:len(E)] = E[:, 1], E[:, 0]                           # every edge, reversed
+    q = np.minimum(u, v) * n + np.maximum(u, v)
+    pos = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
+    ref = np.where(keys[pos] == q, pos, -1)
+    got = edge_lookup(E, kptr, u, v)
+    assert np.array_equal(got, ref) and (got[:len(E)] == np.arange(len(E))).all() and (got == -1).any()
