@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "ReducedHessian", "chain_walk", "segments_scan", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
+           "ortho_gradient", "ReducedHessian", "chain_walk", "segments_scan", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
            "stable_pair_order", "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -1451,6 +1451,33 @@ class TriangleBVH:
         return out, oid
 
 
+# ============================================================================ scatter
+@njit(cache=True, nogil=True)
+def _pair_difference(i, j, w, rv, n):
+    acc_i = np.zeros((n, 3))
+    acc_j = np.zeros((n, 3))
+    for k in range(i.shape[0]):
+        for d in range(3):
+            x = w[k] * rv[k, d]
+            acc_i[i[k], d] += x
+            acc_j[j[k], d] += x
+    return acc_i - acc_j
+
+
+def pair_difference(i, j, w, rv, n):
+    """(n, 3) ``bincount(i, w * rv[:, d]) - bincount(j, w * rv[:, d])`` for each axis ``d``:
+    the pairs' vectors ``w[k] rv[k]`` summed onto their first vertices minus those summed onto
+    their second, each sum in pair order from zero (numpy's bincount, the same bits)."""
+    i, j = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (i, j))
+    w = np.ascontiguousarray(w, dtype=np.float64).reshape(-1)
+    rv = np.ascontiguousarray(rv, dtype=np.float64).reshape(-1, 3)
+    if not (len(i) == len(j) == len(w) == len(rv)):
+        raise ValueError("pair_difference needs one i, j, w and rv per pair")
+    _check_index("i", i, int(n))
+    _check_index("j", j, int(n))
+    return _pair_difference(i, j, w, rv, int(n))
+
+
 # ============================================================================ segments
 @njit(cache=True, nogil=True)
 def _segments_scan(q, lo, hi, a, ab):
@@ -2047,6 +2074,7 @@ def warm_up() -> float:
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
     chain_walk(np.array([[0, 1], [0, 2], [1, 2], [2, 3]]), 4)
     segments_scan(np.zeros((1, 3)), [0], [1], np.zeros((1, 3)), np.ones((1, 3)))
+    pair_difference(np.array([0]), np.array([1]), np.ones(1), np.ones((1, 3)), 2)
     rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),
                         np.array([2, 2, 1, 0]), np.array([0, 2, 4, 5]))
     rh.values(np.eye(3)[[0, 1, 0, 1, 2]], np.ones(4), np.ones(5),

@@ -122,7 +122,9 @@ def _rank(prio, tiebreak):
     """Unique integer rank of each candidate: larger ``prio`` first, ties broken by a hash of
     ``tiebreak`` (scrambled so that equal priorities do not form spatially ordered chains,
     which would make the independent sets small)."""
-    order = np.lexsort((np.asarray(tiebreak), _hash(tiebreak), -np.asarray(prio)))
+    # the hash is a bijection of ids below its prime modulus, so it breaks every tie by itself
+    # (the ids as a third key never decided anything)
+    order = np.lexsort((_hash(tiebreak), -np.asarray(prio)))
     r = np.empty(len(prio), dtype=np.int64)
     r[order] = np.arange(len(prio), 0, -1)
     return r

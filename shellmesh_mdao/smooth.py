@@ -65,7 +65,7 @@ from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
 from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, face_quality, min_corner_sj,
-                      ortho_gradient, ortho_jacobian)
+                      ortho_gradient, ortho_jacobian, pair_difference)
 from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -1239,11 +1239,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
             g = g + warp_weight * warpt.gradient(xc, n).ravel()
         if target_edge is not None and energy == "squared":
             rv = (target_edge * pf)[:, None] * _unit(P[i] - P[j])
-            gv = np.zeros((n, 3))
-            for d in range(3):
-                gv[:, d] = np.bincount(i, weights=pw * rv[:, d], minlength=n) \
-                    - np.bincount(j, weights=pw * rv[:, d], minlength=n)
-            g = g - gv.ravel()
+            g = g - pair_difference(i, j, pw, rv, n).ravel()      # the rest vectors' pull, per vertex
         if method == "kkt":
             D = _solve_kkt(K3, rho_v, n, g, supports, T, owner)
         else:
