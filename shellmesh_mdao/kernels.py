@@ -549,49 +549,48 @@ def chain_walk(edges, n):
 
 
 # ============================================================================ smoothing Hessian
+@njit(cache=True, nogil=True, inline="always")
+def _couple(u, v, cnt, adj, fill, fill_pass):
+    """Count (first pass) or list (second pass) ``v`` in ``u``'s adjacency row."""
+    if fill_pass:
+        adj[fill[u]] = v
+        fill[u] += 1
+    else:
+        cnt[u + 1] += 1
+
+
+@njit(cache=True, nogil=True)
+def _couples(pu, pv, quads, ncol, cnt, adj, fill, fill_pass):
+    """Every couple of vertices with columns: each with itself, the ends of each pair (both
+    ways), the corners of each quad."""
+    for v in range(ncol.shape[0]):
+        if ncol[v] > 0:
+            _couple(v, v, cnt, adj, fill, fill_pass)
+    for e in range(pu.shape[0]):
+        u, v = pu[e], pv[e]
+        if u != v and ncol[u] > 0 and ncol[v] > 0:
+            _couple(u, v, cnt, adj, fill, fill_pass)
+            _couple(v, u, cnt, adj, fill, fill_pass)
+    for q in range(quads.shape[0]):
+        for i in range(4):
+            u = quads[q, i]
+            if ncol[u] > 0:
+                for j in range(4):
+                    v = quads[q, j]
+                    if v != u and ncol[v] > 0:
+                        _couple(u, v, cnt, adj, fill, fill_pass)
+
+
 @njit(cache=True, nogil=True)
 def _hessian_pattern(pu, pv, quads, ncol, col_start):
     n = ncol.shape[0]
     cnt = np.zeros(n + 1, np.int64)
-    for v in range(n):
-        if ncol[v] > 0:
-            cnt[v + 1] += 1
-    for e in range(pu.shape[0]):
-        u, v = pu[e], pv[e]
-        if u != v and ncol[u] > 0 and ncol[v] > 0:
-            cnt[u + 1] += 1
-            cnt[v + 1] += 1
-    for q in range(quads.shape[0]):
-        for i in range(4):
-            u = quads[q, i]
-            if ncol[u] > 0:
-                for j in range(4):
-                    v = quads[q, j]
-                    if v != u and ncol[v] > 0:
-                        cnt[u + 1] += 1
+    none = np.zeros(0, np.int64)
+    _couples(pu, pv, quads, ncol, cnt, none, none, False)
     ptr = np.cumsum(cnt)
     adj = np.empty(ptr[n], np.int64)
     fill = ptr[:n].copy()
-    for v in range(n):
-        if ncol[v] > 0:
-            adj[fill[v]] = v
-            fill[v] += 1
-    for e in range(pu.shape[0]):
-        u, v = pu[e], pv[e]
-        if u != v and ncol[u] > 0 and ncol[v] > 0:
-            adj[fill[u]] = v
-            fill[u] += 1
-            adj[fill[v]] = u
-            fill[v] += 1
-    for q in range(quads.shape[0]):
-        for i in range(4):
-            u = quads[q, i]
-            if ncol[u] > 0:
-                for j in range(4):
-                    v = quads[q, j]
-                    if v != u and ncol[v] > 0:
-                        adj[fill[u]] = v
-                        fill[u] += 1
+    _couples(pu, pv, quads, ncol, cnt, adj, fill, True)
     # each row sorted, repeats dropped
     vptr = np.zeros(n + 1, np.int64)
     vadj = np.empty(ptr[n], np.int64)

@@ -190,17 +190,25 @@ def _tri_normal(P: np.ndarray) -> np.ndarray:
 _CORNER_METRICS = ("aspect", "min_angle", "max_angle", "taper", "scaled_jacobian")
 
 
+def _corner_metrics(P: np.ndarray, n_of, want, out: dict):
+    """Into ``out``, the corner-based metrics of ``want`` (aspect, the angles) of polygons P
+    with normals ``n_of(P)``; returns ``(sj, s)`` of :func:`_corner_terms` (None, None when
+    none of them is wanted)."""
+    if not any(k in want for k in _CORNER_METRICS):
+        return None, None
+    L, ang, sj, s = _corner_terms(P, n_of(P), angles="min_angle" in want or "max_angle" in want)
+    if "aspect" in want:
+        out["aspect"] = _aspect_from_lengths(L)
+    if ang is not None:
+        out["min_angle"], out["max_angle"] = ang.min(0), ang.max(0)
+    return sj, s
+
+
 def _quad_metrics(P: np.ndarray, want=METRICS) -> dict:
     """The metrics ``want`` (default all) of quads P (3, 4, mq)."""
     P0, P1, P2, P3 = P[:, 0], P[:, 1], P[:, 2], P[:, 3]
     out = {}
-    if any(k in want for k in _CORNER_METRICS):
-        n = _quad_normal(P)
-        L, ang, sj, s = _corner_terms(P, n, angles="min_angle" in want or "max_angle" in want)
-        if "aspect" in want:
-            out["aspect"] = _aspect_from_lengths(L)
-        if ang is not None:
-            out["min_angle"], out["max_angle"] = ang.min(0), ang.max(0)
+    sj, s = _corner_metrics(P, _quad_normal, want, out)
     if "skew" in want:
         # skew: lines joining opposite edge midpoints, 2(M2 - M0) and 2(M3 - M1)
         u = (P2 + P3) - (P0 + P1)
@@ -226,13 +234,8 @@ def _tri_metrics(P: np.ndarray, want=METRICS) -> dict:
     """The metrics ``want`` (default all) of triangles P (3, 3, mt)."""
     m = P.shape[2]
     out = {}
-    if any(k in want for k in _CORNER_METRICS):
-        n = _tri_normal(P)
-        L, ang, sj, _ = _corner_terms(P, n, angles="min_angle" in want or "max_angle" in want)
-        if "aspect" in want:
-            out["aspect"] = _aspect_from_lengths(L)
-        if ang is not None:
-            out["min_angle"], out["max_angle"] = ang.min(0), ang.max(0)
+    sj, _ = _corner_metrics(P, _tri_normal, want, out)
+    if "scaled_jacobian" in want:
         out["scaled_jacobian"] = _TRI_SJ_SCALE * sj.min(0)
     if "skew" in want:
         # skew: at corner k, the median (corner -> midpoint of the opposite edge) against the
