@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "ReducedHessian", "chain_walk", "segments_scan", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
+           "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "segments_scan", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
            "stable_pair_order", "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -546,6 +546,138 @@ def chain_walk(edges, n):
     if len(e) and ((e[:, 0] >= e[:, 1]).any() or (len(e) > 1 and not (np.diff(e[:, 0] * n + e[:, 1]) > 0).all())):
         raise ValueError("edges must be distinct rows (u, v) with u < v, sorted")
     return _chain_walk(e, n)
+
+
+@njit(cache=True, nogil=True)
+def _incidence(u, v, nn):
+    """Per node the links at it, by rising link id (CSR)."""
+    ptr = np.zeros(nn + 1, np.int64)
+    for e in range(u.shape[0]):
+        ptr[u[e] + 1] += 1
+        ptr[v[e] + 1] += 1
+    for i in range(nn):
+        ptr[i + 1] += ptr[i]
+    inc = np.empty(ptr[nn], np.int64)
+    fill = ptr[:nn].copy()
+    for e in range(u.shape[0]):
+        inc[fill[u[e]]] = e
+        fill[u[e]] += 1
+        inc[fill[v[e]]] = e
+        fill[v[e]] += 1
+    return ptr, inc
+
+
+@njit(cache=True, nogil=True)
+def _link_component(u, v, nn, best):
+    ptr, inc = _incidence(u, v, nn)
+    seen_node = np.zeros(nn, np.bool_)
+    in_comp = np.zeros(u.shape[0], np.bool_)
+    stack = np.empty(nn, np.int64)
+    stack[0] = u[best]
+    seen_node[u[best]] = True
+    top = 1
+    while top > 0:
+        top -= 1
+        x = stack[top]
+        for p in range(ptr[x], ptr[x + 1]):
+            e = inc[p]
+            in_comp[e] = True
+            y = v[e] if u[e] == x else u[e]
+            if not seen_node[y]:
+                seen_node[y] = True
+                stack[top] = y
+                top += 1
+    return in_comp
+
+
+@njit(cache=True, nogil=True)
+def _arc_order(lu, lv, nn, start):
+    # each node's neighbours by rising id, a repeated link once with the sum of its ids + 1
+    # (the symmetric CSR matrix of the links' ids + 1, as scipy builds and sums it)
+    L = lu.shape[0]
+    lo = np.empty(2 * L, np.int64)
+    hi = np.empty(2 * L, np.int64)
+    val = np.empty(2 * L, np.int64)
+    for e in range(L):
+        lo[2 * e], hi[2 * e], val[2 * e] = lu[e], lv[e], e + 1
+        lo[2 * e + 1], hi[2 * e + 1], val[2 * e + 1] = lv[e], lu[e], e + 1
+    key = lo * nn + hi
+    o = np.argsort(key, kind="mergesort")
+    ptr = np.zeros(nn + 1, np.int64)
+    nbr = np.empty(2 * L, np.int64)
+    w = np.empty(2 * L, np.int64)
+    m = 0
+    for t in range(2 * L):
+        i = o[t]
+        if m > 0 and t > 0 and key[o[t - 1]] == key[i]:
+            w[m - 1] += val[i]
+            continue
+        nbr[m], w[m] = hi[i], val[i]
+        ptr[lo[i] + 1] += 1
+        m += 1
+    for i in range(nn):
+        ptr[i + 1] += ptr[i]
+    # depth-first order from start, the lowest unvisited neighbour first (scipy's walk)
+    seen = np.zeros(nn, np.bool_)
+    order = np.empty(nn, np.int64)
+    seg = np.empty(nn, np.int64)
+    root = np.empty(nn, np.int64)
+    order[0] = start
+    seen[start] = True
+    root[0] = start
+    r = 0
+    k = 1
+    while r >= 0:
+        x = root[r]
+        moved = False
+        for p in range(ptr[x], ptr[x + 1]):
+            y = nbr[p]
+            if not seen[y]:
+                seen[y] = True
+                if order[k - 1] == x:
+                    seg[k - 1] = w[p] - 1
+                else:                      # after a dead end: the matrix entry of the two nodes
+                    seg[k - 1] = -1
+                    z = order[k - 1]
+                    for q in range(ptr[z], ptr[z + 1]):
+                        if nbr[q] == y:
+                            seg[k - 1] = w[q] - 1
+                order[k] = y
+                k += 1
+                r += 1
+                root[r] = y
+                moved = True
+                break
+        if not moved:
+            r -= 1
+    return order[:k], seg[:k - 1]
+
+
+def arc_links(u, v, nn, best):
+    """The links ``(u[e], v[e])`` (node ids in [0, nn)) connected to link ``best``: a bool
+    mask (a walk over the links at each node)."""
+    u, v = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (u, v))
+    if len(u) != len(v) or not (0 <= int(best) < len(u)):
+        raise ValueError("arc_links needs as many u as v and best among them")
+    _check_index("u", u, int(nn))
+    _check_index("v", v, int(nn))
+    return _link_component(u, v, int(nn), int(best))
+
+
+def arc_order(lu, lv, nn, start):
+    """The depth-first order of the graph of the links ``(lu[e], lv[e])`` from node ``start``,
+    the lowest unvisited neighbour first (scipy's ``depth_first_order`` on the symmetric link
+    matrix), and for each pair of consecutive nodes of that order the link between them: the
+    entry of the symmetric matrix of link ids + 1, minus 1 (a link repeated between two nodes
+    gives the sum of their ids + 1, minus 1; two nodes without a link -1), as
+    ``section.section_arc`` read it from that matrix."""
+    lu, lv = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (lu, lv))
+    if len(lu) != len(lv):
+        raise ValueError("arc_order needs as many lu as lv")
+    _check_index("lu", lu, int(nn))
+    _check_index("lv", lv, int(nn))
+    _check_index("start", np.array([int(start)]), int(nn))
+    return _arc_order(lu, lv, int(nn), int(start))
 
 
 # ============================================================================ smoothing Hessian
@@ -2072,6 +2204,8 @@ def warm_up() -> float:
                    np.ones(1), np.ones(1), np.array([0, 2, 4]), np.array([2, 2, 0]), np.eye(3)[[0, 1, 0, 1]])
     ortho_gradient([0], [1], [2], np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.ones(1), np.ones(1), np.eye(3), 3)
     chain_walk(np.array([[0, 1], [0, 2], [1, 2], [2, 3]]), 4)
+    arc_links(np.array([0, 1, 3]), np.array([1, 2, 4]), 5, 0)
+    arc_order(np.array([0, 1, 2]), np.array([1, 2, 0]), 3, 0)
     segments_scan(np.zeros((1, 3)), [0], [1], np.zeros((1, 3)), np.ones((1, 3)))
     pair_difference(np.array([0]), np.array([1]), np.ones(1), np.ones((1, 3)), 2)
     rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),

@@ -17,10 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.csgraph import connected_components, depth_first_order
 
 from .errors import ImprintError
+from .kernels import arc_links, arc_order
 from .mesh import norm_rows
 
 __all__ = ["Plane", "PlaneSection", "plane_section", "section_arc", "SectionArc"]
@@ -208,9 +207,6 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
     pos[:k] = sec.nodes
     pos[u] = q0
     pos[v] = q1
-    g = sparse.coo_matrix((np.ones(len(li)), (u, v)), shape=(nn, nn)).tocsr()
-    g = g + g.T
-    ncomp, label = connected_components(g, directed=False)
     # pick the component through the seed
     if seed is not None:
         seed = np.asarray(seed, float)
@@ -227,8 +223,7 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
         best = cand[int(np.argmin(dist))]
     else:
         best = 0
-    comp = label[u[best]]
-    in_comp = label[u] == comp
+    in_comp = arc_links(u, v, nn, best)
     lu, lv, ltri = u[in_comp], v[in_comp], sec.link_tri[li][in_comp]
     deg = np.bincount(np.concatenate([lu, lv]), minlength=nn)
     if (deg > 2).any():
@@ -238,12 +233,11 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
     ends = np.flatnonzero(deg == 1)
     closed = len(ends) == 0
     start = int(ends.min()) if len(ends) else int(lu.min())
-    sub = sparse.coo_matrix((np.arange(1, len(lu) + 1), (lu, lv)), shape=(nn, nn)).tocsr()
-    sub = sub + sub.T
-    order = depth_first_order(sub, start, directed=False, return_predecessors=False)
+    # the walk from the start, the lowest neighbour first, and the link of each step
+    # (kernels.arc_order: scipy's depth-first order of the link graph, compiled)
+    order, seg_link = arc_order(lu, lv, nn, start)
     pts = pos[order]
     # triangle of each consecutive segment
-    seg_link = np.asarray(sub[order[:-1], order[1:]]).ravel().astype(np.int64) - 1
     seg_tri = ltri[seg_link]
     # drop zero-length pieces (plane through vertices)
     if merge_tol is None:

@@ -141,3 +141,42 @@ def test_corpus_sections_exact(geometry_dir, manifest):
         assert d.max() < 1e-9 * diag, name
         # upper side: every point on the +up side of the chord line
         assert ((arc.points - le) @ up).min() > -1e-9 * diag, name
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_arc_kernels_match_the_scipy_graph_walk(seed):
+    """section_arc's link component (kernels.arc_links) and walk (kernels.arc_order) give what
+    scipy's connected components, depth-first order and summed link matrix gave: on paths,
+    loops, branches (a walk that backtracks) and a link repeated between two nodes."""
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components, depth_first_order
+
+    from shellmesh_mdao.kernels import arc_links, arc_order
+    rng = np.random.default_rng(60 + seed)
+    nn = 80
+    u, v = [], []
+    for _ in range(6):
+        k = int(rng.integers(2, 12))
+        nodes = rng.choice(nn, k, replace=False)
+        for t in range(k - 1):
+            u.append(nodes[t])
+            v.append(nodes[t + 1])
+        if rng.random() < 0.5:
+            u.append(nodes[-1])
+            v.append(nodes[0])
+    u.append(u[0])
+    v.append(v[0])                                            # a repeated link
+    u, v = np.array(u), np.array(v)
+    g = sparse.coo_matrix((np.ones(len(u)), (u, v)), shape=(nn, nn)).tocsr()
+    _, label = connected_components(g + g.T, directed=False)
+    for best in range(0, len(u), 3):
+        got = arc_links(u, v, nn, best)
+        assert np.array_equal(got, label[u] == label[u[best]])
+        lu, lv = u[got], v[got]
+        sub = sparse.coo_matrix((np.arange(1, len(lu) + 1), (lu, lv)), shape=(nn, nn)).tocsr()
+        sub = sub + sub.T
+        for start in np.unique(np.concatenate([lu, lv]))[:4]:
+            order = depth_first_order(sub, start, directed=False, return_predecessors=False)
+            link = np.asarray(sub[order[:-1], order[1:]]).ravel().astype(np.int64) - 1
+            o2, l2 = arc_order(lu, lv, nn, start)
+            assert np.array_equal(o2, order) and np.array_equal(l2, link)
