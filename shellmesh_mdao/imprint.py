@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import chain_walk, corner_cosines, greedy_independent, segments_scan, stable_pair_order
+from .kernels import chain_walk, corner_cosines, greedy_independent, segments_scan, segments_within, stable_pair_order
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
@@ -966,7 +966,14 @@ def _arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps):
 
 def _segment_hits(q, a, b, eps):
     """Every (point, segment) pair with point ``q[i]`` within ``eps`` of segment ``a[j]-b[j]``:
-    ``(i, j, t)`` with ``t`` the parameter of the closest point along the segment."""
+    ``(i, j, t)`` with ``t`` the parameter of the closest point along the segment, in the order
+    of ``i``, then ``j``. Up to :data:`SCAN_WORK` pairs a compiled loop scans them all
+    (:func:`~shellmesh_mdao.kernels.segments_within`); above, a KD-tree of the segment
+    midpoints lists the candidates (the same pairs: a segment within ``eps`` has its midpoint
+    within half its length plus ``eps``)."""
+    q = np.atleast_2d(q)
+    if len(q) * len(a) <= SCAN_WORK:
+        return segments_within(q, a, b - a, eps)
     tree = cKDTree(0.5 * (a + b))
     reach = 0.5 * norm_rows(b - a, axis=1).max() + eps
     cand = tree.query_ball_point(q, reach)

@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "segments_scan", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
+           "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
            "stable_pair_order", "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -1643,6 +1643,48 @@ def _segments_scan(q, lo, hi, a, ab):
     return x, dist, seg, tt
 
 
+@njit(cache=True, nogil=True)
+def _segments_within(q, a, ab, eps):
+    m, s = q.shape[0], a.shape[0]
+    cap = max(16, 4 * m)
+    qi = np.empty(cap, np.int64)
+    si = np.empty(cap, np.int64)
+    tt = np.empty(cap, np.float64)
+    k = 0
+    for i in range(m):
+        q0, q1, q2 = q[i, 0], q[i, 1], q[i, 2]
+        for j in range(s):
+            a0, a1, a2 = a[j, 0], a[j, 1], a[j, 2]
+            e0, e1, e2 = ab[j, 0], ab[j, 1], ab[j, 2]
+            L2 = _dot3e(e0, e1, e2, e0, e1, e2)
+            t = _clip01(_dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0))
+            d0, d1, d2 = a0 + t * e0 - q0, a1 + t * e1 - q1, a2 + t * e2 - q2
+            if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) <= eps:
+                if k == cap:
+                    cap *= 2
+                    qi2 = np.empty(cap, np.int64)
+                    si2 = np.empty(cap, np.int64)
+                    tt2 = np.empty(cap, np.float64)
+                    qi2[:k], si2[:k], tt2[:k] = qi[:k], si[:k], tt[:k]
+                    qi, si, tt = qi2, si2, tt2
+                qi[k], si[k], tt[k] = i, j, t
+                k += 1
+    return qi[:k], si[:k], tt[:k]
+
+
+def segments_within(q, a, ab, eps):
+    """Every (point, segment) pair with ``q[i]`` within ``eps`` of the segment ``a[j] + t ab[j]``,
+    ``t`` in [0, 1]: ``(i, j, t)`` in the order of ``i``, then ``j``, with the closest point's
+    ``t`` and distance in numpy's arithmetic (einsum's dot products, ``np.clip``, row norms),
+    scanning every pair."""
+    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    ab = np.ascontiguousarray(ab, dtype=np.float64).reshape(-1, 3)
+    if len(a) != len(ab):
+        raise ValueError("segments_within needs one a and one ab per segment")
+    return _segments_within(q, a, ab, float(eps))
+
+
 def segments_scan(q, lo, hi, a, ab):
     """The closest point to each query ``q[i]`` on the segments ``a[s] + t ab[s]``,
     ``lo[i] <= s < hi[i]`` (a non-empty range), scanning them all: ``(points, distances,
@@ -2207,6 +2249,7 @@ def warm_up() -> float:
     arc_links(np.array([0, 1, 3]), np.array([1, 2, 4]), 5, 0)
     arc_order(np.array([0, 1, 2]), np.array([1, 2, 0]), 3, 0)
     segments_scan(np.zeros((1, 3)), [0], [1], np.zeros((1, 3)), np.ones((1, 3)))
+    segments_within(np.zeros((1, 3)), np.zeros((1, 3)), np.ones((1, 3)), 1.0)
     pair_difference(np.array([0]), np.array([1]), np.ones(1), np.ones((1, 3)), 2)
     rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),
                         np.array([2, 2, 1, 0]), np.array([0, 2, 4, 5]))

@@ -519,3 +519,24 @@ def test_segment_scan_and_kd_tree_give_the_same_closest_points(seed, monkeypatch
     # the query equally near three segments of the symmetric arc takes the first: the end of
     # segment 0 (arc length 1), not the middle of segment 3
     assert got[0][1][0] == 1.0 and np.array_equal(got[0][0][0], [0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_segment_hits_scan_and_kd_tree_agree(seed, monkeypatch):
+    """Every (point, segment) pair within eps: the compiled scan of all pairs and the KD-tree of
+    segment midpoints list the same pairs, in the same order, with the same parameters bit for
+    bit (points on segment ends, on zero-length segments and just outside eps among them)."""
+    from shellmesh_mdao import imprint as imp
+    rng = np.random.default_rng(80 + seed)
+    a = rng.normal(size=(120, 3))
+    b = a + rng.normal(size=(120, 3)) * 0.3
+    b[::11] = a[::11]                                           # zero-length segments
+    eps = 0.05
+    q = np.vstack([a[:30], b[30:60], 0.5 * (a[60:90] + b[60:90]), rng.normal(size=(200, 3))])
+    q[-10:] = a[-10:] + [eps * 1.0001, 0, 0]
+    got = imp._segment_hits(q, a, b, eps)
+    monkeypatch.setattr(imp, "SCAN_WORK", 0)
+    ref = imp._segment_hits(q, a, b, eps)
+    assert len(got[0]) > 90
+    for x, y in zip(got, ref):
+        assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
