@@ -453,8 +453,7 @@ def _chain_walk(e, n):
     closed = np.zeros(k, np.bool_)
     fwd = np.empty(k + 1, np.int64)
     bwd = np.empty(k + 1, np.int64)
-    fe = np.empty(k + 1, np.int64)
-    be = np.empty(k + 1, np.int64)
+    fe = np.empty(k + 1, np.int64)                  # a loop's nodes, before its rotation
     nc = 0
     m = 0
     for i in range(k):

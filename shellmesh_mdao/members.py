@@ -49,7 +49,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError, LayoutError, SizeError
-from .imprint import _arc_param, _arc_point, _closest_on_segments, _sub_polyline
+from .imprint import _arc_param, _arc_point, _sub_polyline
 from .mesh import ShellMesh, vertex_faces, norm_rows, reduce_short
 from .section import Plane
 
