@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
+           "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "corner_sums", "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
            "stable_pair_order", "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
            "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
 
@@ -1608,6 +1608,58 @@ def pair_difference(i, j, w, rv, n):
     return _pair_difference(i, j, w, rv, int(n))
 
 
+# ============================================================================ vertex normals
+@njit(cache=True, nogil=True)
+def _corner_sums(faces, av, n):
+    acc = np.zeros((n, 3))
+    for f in range(faces.shape[0]):
+        for k in range(faces.shape[1]):
+            v = faces[f, k]
+            if v >= 0:
+                acc[v, 0] += av[f, 0]
+                acc[v, 1] += av[f, 1]
+                acc[v, 2] += av[f, 2]
+    return acc
+
+
+@njit(cache=True, nogil=True)
+def _corner_max_turn(faces, vn, fn, n):
+    kap = np.zeros(n)
+    for f in range(faces.shape[0]):
+        for k in range(faces.shape[1]):
+            v = faces[f, k]
+            if v >= 0:
+                x = 1.0 - _dot3e(vn[v, 0], vn[v, 1], vn[v, 2], fn[f, 0], fn[f, 1], fn[f, 2])
+                a = kap[v]
+                if a == a and (x != x or x > a):      # np.maximum: a NaN on either side wins
+                    kap[v] = x
+    return kap
+
+
+def corner_sums(faces, av, n):
+    """(n, 3): each face's vector ``av[f]`` summed onto its corners (``faces`` (m, k), -1 for no
+    corner), face by face and corner by corner from zero: ``np.bincount`` over the valid
+    corners in row-major order, the same bits."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    av = np.ascontiguousarray(av, dtype=np.float64).reshape(-1, 3)
+    if faces.ndim != 2 or len(faces) != len(av):
+        raise ValueError("corner_sums needs (m, k) faces and one (3,) vector per face")
+    _check_index("faces", faces[faces >= 0], int(n))
+    return _corner_sums(faces, av, int(n))
+
+
+def corner_max_turn(faces, vn, fn, n):
+    """(n,): for each vertex the largest ``1 - vn[v] . fn[f]`` over its faces (0 for a vertex
+    without faces): ``np.maximum.at`` of einsum's dot products, the same bits."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    vn = np.ascontiguousarray(vn, dtype=np.float64).reshape(-1, 3)
+    fn = np.ascontiguousarray(fn, dtype=np.float64).reshape(-1, 3)
+    if faces.ndim != 2 or len(faces) != len(fn) or len(vn) != int(n):
+        raise ValueError("corner_max_turn needs (m, k) faces, one normal per face and one per vertex")
+    _check_index("faces", faces[faces >= 0], int(n))
+    return _corner_max_turn(faces, vn, fn, int(n))
+
+
 # ============================================================================ segments
 @njit(cache=True, nogil=True)
 def _segments_scan(q, lo, hi, a, ab):
@@ -2249,6 +2301,8 @@ def warm_up() -> float:
     arc_order(np.array([0, 1, 2]), np.array([1, 2, 0]), 3, 0)
     segments_scan(np.zeros((1, 3)), [0], [1], np.zeros((1, 3)), np.ones((1, 3)))
     segments_within(np.zeros((1, 3)), np.zeros((1, 3)), np.ones((1, 3)), 1.0)
+    corner_sums(np.array([[0, 1, 2, -1]]), np.ones((1, 3)), 3)
+    corner_max_turn(np.array([[0, 1, 2, -1]]), np.eye(3), np.ones((1, 3)), 3)
     pair_difference(np.array([0]), np.array([1]), np.ones(1), np.ones((1, 3)), 2)
     rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),
                         np.array([2, 2, 1, 0]), np.array([0, 2, 4, 5]))

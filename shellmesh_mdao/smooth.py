@@ -64,8 +64,8 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, face_quality, min_corner_sj,
-                      ortho_gradient, ortho_jacobian, pair_difference)
+from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
+                      face_quality, min_corner_sj, ortho_gradient, ortho_jacobian, pair_difference)
 from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
@@ -789,17 +789,11 @@ def _vertex_normals_and_curvature(P, faces, is_tri, n):
     if is_tri.any():
         ct = c[is_tri]
         av[is_tri] = 0.5 * cross_rows(ct[:, 1] - ct[:, 0], ct[:, 2] - ct[:, 0])
-    valid = faces >= 0
-    fi = np.broadcast_to(np.arange(len(faces))[:, None], faces.shape)[valid]
-    vi = faces[valid]
-    acc = np.zeros((n, 3))
-    for d in range(3):
-        acc[:, d] = np.bincount(vi, weights=av[fi, d], minlength=n)
-    vn = _unit(acc)
-    fn = _unit(av)
-    kap = np.zeros(n)
-    np.maximum.at(kap, vi, 1.0 - _dot(vn[vi], fn[fi]))
-    return vn, kap
+    # the face vectors summed onto their corners, and each vertex's largest turn to one of its
+    # faces: compiled loops with bincount's and maximum.at's bits (kernels.corner_sums,
+    # kernels.corner_max_turn)
+    vn = _unit(corner_sums(faces, av, n))
+    return vn, corner_max_turn(faces, vn, _unit(av), n)
 
 
 def mesh_figures(mesh: ShellMesh, supports: Supports | None = None, size: float | None = None) -> dict:

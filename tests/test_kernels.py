@@ -920,3 +920,27 @@ def test_pair_difference_gives_the_bincount_bits():
     for d in range(3):
         ref[:, d] = np.bincount(i, weights=w * rv[:, d], minlength=n) - np.bincount(j, weights=w * rv[:, d], minlength=n)
     assert pair_difference(i, j, w, rv, n).tobytes() == ref.tobytes()
+
+
+def test_corner_sums_and_max_turn_give_the_numpy_bits():
+    """The smoothing's vertex normals and curvature: corner_sums is bincount of each face's
+    vector over its valid corners, corner_max_turn is np.maximum.at of 1 - einsum's dot, bit
+    for bit (triangles padded with -1, vertices without faces)."""
+    from shellmesh_mdao.kernels import corner_max_turn, corner_sums
+    rng = np.random.default_rng(21)
+    n, m = 300, 500
+    faces = np.array([rng.choice(n - 20, 4, replace=False) for _ in range(m)])
+    faces[::3, 3] = -1
+    av = rng.normal(size=(m, 3)) * 10.0 ** rng.uniform(-5, 5, (m, 1))
+    valid = faces >= 0
+    fi = np.broadcast_to(np.arange(m)[:, None], faces.shape)[valid]
+    vi = faces[valid]
+    ref = np.zeros((n, 3))
+    for d in range(3):
+        ref[:, d] = np.bincount(vi, weights=av[fi, d], minlength=n)
+    assert corner_sums(faces, av, n).tobytes() == ref.tobytes()
+    vn = rng.normal(size=(n, 3))
+    fn = rng.normal(size=(m, 3))
+    kap = np.zeros(n)
+    np.maximum.at(kap, vi, 1.0 - np.einsum("ij,ij->i", vn[vi], fn[fi]))
+    assert corner_max_turn(faces, vn, fn, n).tobytes() == kap.tobytes()
