@@ -30,7 +30,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import chain_walk, corner_cosines, greedy_independent, segments_scan, segments_within, stable_pair_order
+from .kernels import (centroid_d2, chain_walk, corner_cosines, greedy_independent, segments_scan, segments_within,
+                      stable_pair_order)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
@@ -176,15 +177,14 @@ def insert_point(P: np.ndarray, T: np.ndarray, comp: np.ndarray, x: np.ndarray, 
     """
     x = np.asarray(x, float)
     insert_point.last_split = None
-    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
-    cen = (a + b + c) / 3
     # candidate triangles: the 32 nearest centroids (nearest first; one point, so a plain
-    # scan beats building a tree), then exact point-triangle distance
+    # compiled scan beats building a tree: kernels.centroid_d2), then exact point-triangle
+    # distance
     k = min(32, len(T))
-    d2 = reduce_short((cen - x) ** 2, "sum")
+    d2 = centroid_d2(P, T, x)
     cand = np.argpartition(d2, k - 1)[:k] if k < len(T) else np.arange(len(T))
     cand = cand[np.argsort(d2[cand], kind="stable")]
-    bary, dist = _point_tri(x, a[cand], b[cand], c[cand])
+    bary, dist = _point_tri(x, P[T[cand, 0]], P[T[cand, 1]], P[T[cand, 2]])
     j = int(np.argmin(dist))
     f = int(cand[j])
     w = bary[j]

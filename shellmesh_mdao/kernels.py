@@ -30,9 +30,12 @@ import numpy as np
 from numba import njit
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
-           "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "corner_sums", "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality", "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order",
-           "stable_pair_order", "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests", "warm_up"]
+           "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
+           "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
+           "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
+           "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
+           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests",
+           "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -1660,6 +1663,31 @@ def corner_max_turn(faces, vn, fn, n):
     return _corner_max_turn(faces, vn, fn, int(n))
 
 
+# ============================================================================ nearest centroids
+@njit(cache=True, nogil=True)
+def _centroid_d2(P, T, x0, x1, x2):
+    m = T.shape[0]
+    out = np.empty(m)
+    for t in range(m):
+        i, j, k = T[t, 0], T[t, 1], T[t, 2]
+        c0 = (P[i, 0] + P[j, 0] + P[k, 0]) / 3 - x0
+        c1 = (P[i, 1] + P[j, 1] + P[k, 1]) / 3 - x1
+        c2 = (P[i, 2] + P[j, 2] + P[k, 2]) / 3 - x2
+        out[t] = (c0 * c0 + c1 * c1) + c2 * c2
+    return out
+
+
+def centroid_d2(P, T, x):
+    """(m,) squared distance from the point ``x`` to each triangle's centroid ``(a + b + c) / 3``,
+    numpy's arithmetic (``reduce_short((cen - x) ** 2, "sum")``, the same bits) without gathering
+    the corners."""
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    T = np.ascontiguousarray(np.asarray(T)[:, :3], dtype=np.int64)
+    x = np.asarray(x, dtype=np.float64).reshape(3)
+    _check_index("T", T, len(P))
+    return _centroid_d2(P, T, float(x[0]), float(x[1]), float(x[2]))
+
+
 # ============================================================================ segments
 @njit(cache=True, nogil=True)
 def _segments_scan(q, lo, hi, a, ab):
@@ -2302,6 +2330,7 @@ def warm_up() -> float:
     segments_scan(np.zeros((1, 3)), [0], [1], np.zeros((1, 3)), np.ones((1, 3)))
     segments_within(np.zeros((1, 3)), np.zeros((1, 3)), np.ones((1, 3)), 1.0)
     corner_sums(np.array([[0, 1, 2, -1]]), np.ones((1, 3)), 3)
+    centroid_d2(np.eye(3), np.array([[0, 1, 2]]), np.zeros(3))
     corner_max_turn(np.array([[0, 1, 2, -1]]), np.eye(3), np.ones((1, 3)), 3)
     pair_difference(np.array([0]), np.array([1]), np.ones(1), np.ones((1, 3)), 2)
     rh = ReducedHessian(np.array([0, 1, 2, 3]), np.array([1, 2, 3, 0]), np.array([[0, 1, 2, 3]]),

@@ -944,3 +944,15 @@ def test_corner_sums_and_max_turn_give_the_numpy_bits():
     kap = np.zeros(n)
     np.maximum.at(kap, vi, 1.0 - np.einsum("ij,ij->i", vn[vi], fn[fi]))
     assert corner_max_turn(faces, vn, fn, n).tobytes() == kap.tobytes()
+
+
+def test_centroid_d2_gives_the_numpy_bits():
+    """The imprint's nearest-centroid scan: the squared centroid distances of numpy's formula."""
+    from shellmesh_mdao.kernels import centroid_d2
+    from shellmesh_mdao.mesh import reduce_short
+    rng = np.random.default_rng(5)
+    P = rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-4, 4, (400, 1))
+    T = np.array([rng.choice(400, 3, replace=False) for _ in range(700)])
+    x = rng.normal(size=3)
+    cen = (P[T[:, 0]] + P[T[:, 1]] + P[T[:, 2]]) / 3
+    assert centroid_d2(P, T, x).tobytes() == reduce_short((cen - x) ** 2, "sum").tobytes()
