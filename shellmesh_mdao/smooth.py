@@ -944,8 +944,11 @@ class _Ortho:
         self.a = np.roll(Q, 1, axis=1).reshape(-1)
         self.c = np.roll(Q, -1, axis=1).reshape(-1)
         self.n = np.repeat(nq, 4, axis=0)
-        lu_ = _norm(P[self.a] - P[self.b])
-        lv = _norm(P[self.c] - P[self.b])
+        # each quad edge's length once: corner k's next arm is edge k (P[c] - P[b]), its previous
+        # arm edge k - 1 reversed (P[a] - P[b] = -(edge k - 1): the same squares, the same norm)
+        L = _norm((C[:, [1, 2, 3, 0]] - C).reshape(-1, 3)).reshape(-1, 4) if len(Q) else np.zeros((0, 4))
+        lv = L.reshape(-1)
+        lu_ = np.roll(L, 1, axis=1).reshape(-1)
         ok = (lu_ > 0) & (lv > 0)
         self.su = np.divide(1.0, lu_, out=np.zeros_like(lu_), where=ok)
         self.sv = np.divide(1.0, lv, out=np.zeros_like(lv), where=ok)
