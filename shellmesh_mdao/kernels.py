@@ -1689,6 +1689,19 @@ def centroid_d2(P, T, x):
 
 
 # ============================================================================ segments
+@njit(cache=True, nogil=True, inline="always")
+def _on_segment_ab(q0, q1, q2, a, ab, s):
+    """Closest point of segment ``s`` (``a[s] + t ab[s]``) to ``q``: ``(t, x0, x1, x2, distance)``
+    in the arithmetic of ``imprint._pick_segments`` (einsum's dot products, ``np.clip``, a t
+    of 0 on a zero-length segment, row norms)."""
+    a0, a1, a2 = a[s, 0], a[s, 1], a[s, 2]
+    e0, e1, e2 = ab[s, 0], ab[s, 1], ab[s, 2]
+    L2 = _dot3e(e0, e1, e2, e0, e1, e2)
+    t = _clip01(_dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0))
+    x0, x1, x2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
+    return t, x0, x1, x2, np.sqrt(_sq_dist(x0, x1, x2, q0, q1, q2))
+
+
 @njit(cache=True, nogil=True)
 def _segments_scan(q, lo, hi, a, ab):
     m = q.shape[0]
@@ -1703,14 +1716,7 @@ def _segments_scan(q, lo, hi, a, ab):
         bt = 0.0
         b0 = b1 = b2 = 0.0
         for s in range(lo[i], hi[i]):
-            a0, a1, a2 = a[s, 0], a[s, 1], a[s, 2]
-            e0, e1, e2 = ab[s, 0], ab[s, 1], ab[s, 2]
-            L2 = _dot3e(e0, e1, e2, e0, e1, e2)
-            t = _dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0)
-            t = _clip01(t)
-            x0, x1, x2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
-            d0, d1, d2 = x0 - q0, x1 - q1, x2 - q2
-            d = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            t, x0, x1, x2, d = _on_segment_ab(q0, q1, q2, a, ab, s)
             # the nearest, the lowest segment among equals; NaN distances last (np.lexsort)
             if bs < 0 or d < bd or (bd != bd and d == d):
                 bs, bd, bt = s, d, t
@@ -1733,12 +1739,8 @@ def _segments_within(q, a, ab, eps):
     for i in range(m):
         q0, q1, q2 = q[i, 0], q[i, 1], q[i, 2]
         for j in range(s):
-            a0, a1, a2 = a[j, 0], a[j, 1], a[j, 2]
-            e0, e1, e2 = ab[j, 0], ab[j, 1], ab[j, 2]
-            L2 = _dot3e(e0, e1, e2, e0, e1, e2)
-            t = _clip01(_dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0))
-            d0, d1, d2 = a0 + t * e0 - q0, a1 + t * e1 - q1, a2 + t * e2 - q2
-            if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) <= eps:
+            t, _, _, _, d = _on_segment_ab(q0, q1, q2, a, ab, j)
+            if d <= eps:
                 if k == cap:
                     cap *= 2
                     qi2 = np.empty(cap, np.int64)

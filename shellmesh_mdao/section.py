@@ -20,7 +20,7 @@ import numpy as np
 
 from .errors import ImprintError
 from .kernels import arc_links, arc_order
-from .mesh import norm_rows
+from .mesh import bbox_diagonal, norm_rows
 
 __all__ = ["Plane", "PlaneSection", "plane_section", "section_arc", "SectionArc"]
 
@@ -241,7 +241,7 @@ def section_arc(points: np.ndarray, tris: np.ndarray, plane: Plane, bounds=(), s
     seg_tri = ltri[seg_link]
     # drop zero-length pieces (plane through vertices)
     if merge_tol is None:
-        merge_tol = 1e-12 * float(np.linalg.norm(pts.max(0) - pts.min(0)))
+        merge_tol = 1e-12 * bbox_diagonal(pts)
     step = norm_rows(np.diff(pts, axis=0), axis=1)
     keep_pt = np.concatenate([[True], step > merge_tol])
     if closed:
