@@ -292,7 +292,7 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
                 start = _greedy_matching(r0, r1, rw, m)
                 sol = _highs_solve(rw, A, np.full(len(need), -np.inf), np.ones(len(need)),
                                    np.ones(len(ridx)), integer=True, time_limit=time_limit,
-                                   mip_gap=mip_gap, start=start)
+                                   mip_gap=mip_gap, start=start, presolve=False)
                 solve_s = sol.seconds
                 status = sol.status
                 if sol.x is None:

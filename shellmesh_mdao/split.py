@@ -252,8 +252,12 @@ def _highs_core(highspy):
 
 
 def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, time_limit: float,
-                 mip_gap: float | None = None, start: np.ndarray | None = None) -> _Solve:
+                 mip_gap: float | None = None, start: np.ndarray | None = None,
+                 presolve: bool | None = None) -> _Solve:
     """Solve ``min c^T x, row_lo <= A x <= row_hi, 0 <= x <= ub`` with HiGHS.
+
+    ``presolve``: HiGHS's presolve on or off; default (None) off for an LP and HiGHS's
+    choice for a MIP.
 
     The model is passed in one piece (HighsLp, row-wise CSR).  Returns the primal
     solution (None when HiGHS found none), HiGHS's model-status string, objective,
@@ -269,7 +273,8 @@ def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, 
     h = _highs_core(highspy)()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("random_seed", 0)
-    h.setOptionValue("presolve", "off" if not integer else "choose")
+    h.setOptionValue("presolve", ("choose" if integer else "off") if presolve is None else
+                     ("on" if presolve else "off"))
     h.setOptionValue("time_limit", float(time_limit))
     if mip_gap is not None:
         h.setOptionValue("mip_rel_gap", float(mip_gap))
