@@ -16,15 +16,18 @@ the smoother ("rows of three"), and the remesh's collapse and flip tests. Where 
 three products (einsum, row norms) the loops sum them in numpy's order. Angles stay with
 numpy: the loops hand back the arguments of its ``arctan2`` and ``arccos`` (on a machine
 with AVX-512 numpy computes those with its own vector code, whose last bits differ from the
-C library's that a compiled loop would call).
+C library's that a compiled loop would call). The exception is :func:`collapse_select`, whose
+tests run inside the greedy selection: its angle test uses the C library's atan2.
 
 The functions are compiled on first use and cached on disk next to this file (numba's
 ``cache=True``; :func:`warm_up` does it ahead). Every result is the same, bit for bit, as
-the numpy code it replaces (the tests compare the two; the one exception is documented at
-:func:`closest_on_triangles`). The compiled loops do not check bounds, so the Python
+the numpy code it replaces (the tests compare the two; the exceptions are documented at
+:func:`closest_on_triangles` and :func:`collapse_select`). The compiled loops do not check bounds, so the Python
 wrappers check every index before handing it over.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -34,7 +37,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
            "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "CollapseTests", "flip_tests",
+           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_tests",
            "warm_up"]
 
 
@@ -1949,87 +1952,167 @@ def _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
     return (not any_reg) or ((not nan) and best > cos_facing)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _tri_min_deg(A, B, C):
+    """Smallest angle (degrees) of triangle (A, B, C) as ``remesh._min_angle_of`` computes it
+    (the corners at A and B by arctan2, the third what remains of pi; a NaN wins), with the C
+    library's atan2 instead of numpy's."""
+    s0, c0 = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
+    s1, c1 = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2], A[0] - B[0], A[1] - B[1], A[2] - B[2])
+    a0 = math.atan2(s0, c0)
+    a1 = math.atan2(s1, c1)
+    return _min_nan(_min_nan(a0, a1), np.pi - a0 - a1) * (180.0 / np.pi)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def _collapse_tests(a, b, okd, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri,
-                    tri_n, cos_facing):
-    k = a.shape[0]
-    rmax = np.zeros(k)
-    ok = okd.copy()
-    n_old = 0
-    n_new = 0
-    for i in range(k):                                   # the edge-length test; face counts
-        if not ok[i]:
+def _collapse_score(ai, bi, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n,
+                    cos_facing):
+    """The tests of :func:`collapse_select` for one pair: rmax of collapsing ``ai`` into ``bi``,
+    inf where a test fails."""
+    r_max = 0.0
+    for p in range(nptr[ai], nptr[ai + 1]):
+        x = nbr[p]
+        if x == bi:
             continue
-        ai, bi = a[i], b[i]
-        r_max = 0.0
-        for p in range(nptr[ai], nptr[ai + 1]):
-            x = nbr[p]
-            if x == bi:
-                continue
-            d0, d1, d2 = P[x, 0] - P[bi, 0], P[x, 1] - P[bi, 1], P[x, 2] - P[bi, 2]
-            r = np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2)) / (0.5 * (h[x] + h[bi]))
-            if r_max == r_max and (r != r or r > r_max):
-                r_max = r
-        rmax[i] = r_max
-        if not r_max <= max_len_ratio:
-            ok[i] = False
+        d0, d1, d2 = P[x, 0] - P[bi, 0], P[x, 1] - P[bi, 1], P[x, 2] - P[bi, 2]
+        r = np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2)) / (0.5 * (h[x] + h[bi]))
+        if r_max == r_max and (r != r or r > r_max):
+            r_max = r
+    if not r_max <= max_len_ratio:
+        return np.inf
+    cmin = np.inf
+    amin_old = np.inf
+    amin_new = np.inf
+    hb2 = 1e-30 * (h[bi] * h[bi])
+    for p in range(fptr[ai], fptr[ai + 1]):
+        f = vf[p]
+        c0, c1, c2 = F[f, 0], F[f, 1], F[f, 2]
+        amin_old = _min_nan(amin_old, _tri_min_deg(P[c0], P[c1], P[c2]))
+        if c0 == bi or c1 == bi or c2 == bi:
             continue
-        for p in range(fptr[ai], fptr[ai + 1]):
-            f = vf[p]
-            n_old += 1
-            if F[f, 0] != bi and F[f, 1] != bi and F[f, 2] != bi:
-                n_new += 1
-    own_old = np.empty(n_old, np.int64)
-    sc_old = np.empty((4, n_old))
-    own_new = np.empty(n_new, np.int64)
-    sc_new = np.empty((4, n_new))
-    io = 0
-    jn = 0
-    for i in range(k):                                   # normal turn, facing; the angles' arguments
-        if not ok[i]:
-            continue
-        ai, bi = a[i], b[i]
-        cmin = np.inf
-        facing = True
-        hb2 = 1e-30 * (h[bi] * h[bi])
-        for p in range(fptr[ai], fptr[ai + 1]):
-            f = vf[p]
-            c0, c1, c2 = F[f, 0], F[f, 1], F[f, 2]
-            A, B, C = P[c0], P[c1], P[c2]
-            sc_old[0, io], sc_old[1, io] = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2],
-                                                    C[0] - A[0], C[1] - A[1], C[2] - A[2])
-            sc_old[2, io], sc_old[3, io] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2],
-                                                    A[0] - B[0], A[1] - B[1], A[2] - B[2])
-            own_old[io] = i
-            io += 1
-            if c0 == bi or c1 == bi or c2 == bi:
-                continue
-            q0 = bi if c0 == ai else c0
-            q1 = bi if c1 == ai else c1
-            q2 = bi if c2 == ai else c2
-            A, B, C = P[q0], P[q1], P[q2]
-            u0, u1, u2 = B[0] - A[0], B[1] - A[1], B[2] - A[2]
-            v0, v1, v2 = C[0] - A[0], C[1] - A[1], C[2] - A[2]
-            n0 = u1 * v2 - u2 * v1
-            n1 = u2 * v0 - u0 * v2
-            n2 = u0 * v1 - u1 * v0
-            area = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
-            if area > 0:
-                n0, n1, n2 = n0 / area, n1 / area, n2 / area
-            else:
-                n0 = n1 = n2 = 0.0
-            cosn = _dot3e(n0, n1, n2, fn_old[f, 0], fn_old[f, 1], fn_old[f, 2])
-            cmin = _min_nan(cmin, cosn if area > hb2 else -2.0)
-            if not _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
-                facing = False
-            sc_new[0, jn], sc_new[1, jn] = _sin_cos(u0, u1, u2, v0, v1, v2)
-            sc_new[2, jn], sc_new[3, jn] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2],
-                                                    A[0] - B[0], A[1] - B[1], A[2] - B[2])
-            own_new[jn] = i
-            jn += 1
-        if not (cmin > cos_turn and facing):
-            ok[i] = False
-    return rmax, ok, own_old, sc_old, own_new, sc_new
+        q0 = bi if c0 == ai else c0
+        q1 = bi if c1 == ai else c1
+        q2 = bi if c2 == ai else c2
+        A, B, C = P[q0], P[q1], P[q2]
+        u0, u1, u2 = B[0] - A[0], B[1] - A[1], B[2] - A[2]
+        v0, v1, v2 = C[0] - A[0], C[1] - A[1], C[2] - A[2]
+        n0 = u1 * v2 - u2 * v1
+        n1 = u2 * v0 - u0 * v2
+        n2 = u0 * v1 - u1 * v0
+        area = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
+        if area > 0:
+            n0, n1, n2 = n0 / area, n1 / area, n2 / area
+        else:
+            n0 = n1 = n2 = 0.0
+        cosn = _dot3e(n0, n1, n2, fn_old[f, 0], fn_old[f, 1], fn_old[f, 2])
+        cmin = _min_nan(cmin, cosn if area > hb2 else -2.0)
+        if not _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
+            return np.inf
+        amin_new = _min_nan(amin_new, _tri_min_deg(A, B, C))
+    if not cmin > cos_turn:
+        return np.inf
+    if not amin_new >= _min_nan(5.0, 0.5 * amin_old):
+        return np.inf
+    return r_max
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr, nbr, fptr, vf, F, P, h,
+                     max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n, cos_facing):
+    """:func:`_waves` with the collapse tests of :func:`_collapse_score` as the check: both
+    directions of each winner, the one with the smaller rmax taken (u into v on a tie)."""
+    ncand = alive.shape[0]
+    rtop = rptr[:-1].copy()
+    resolved = ~alive
+    seen = np.full(ncand, -1, np.int64)
+    out_a = np.empty(ncand, np.int64)
+    out_b = np.empty(ncand, np.int64)
+    na = 0
+    win = _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand)
+    for wave in range(max_sub):
+        if win.shape[0] == 0:
+            break
+        good = np.zeros(win.shape[0], np.bool_)
+        for i in range(win.shape[0]):
+            c = win[i]
+            s0 = np.inf
+            s1 = np.inf
+            if dir_ok[c, 0]:
+                s0 = _collapse_score(u[c], v[c], nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn,
+                                     kind, vtri, tri_n, cos_facing)
+            if dir_ok[c, 1]:
+                s1 = _collapse_score(v[c], u[c], nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn,
+                                     kind, vtri, tri_n, cos_facing)
+            if s0 < np.inf or s1 < np.inf:
+                good[i] = True
+                if s1 < s0:
+                    out_a[na], out_b[na] = v[c], u[c]
+                else:
+                    out_a[na], out_b[na] = u[c], v[c]
+                na += 1
+        if wave + 1 == max_sub:
+            break
+        win = _next_wave(win, good, cptr, cres, rtop, rptr, rcand, resolved, seen, wave)
+    return out_a[:na], out_b[:na]
+
+
+def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, max_len_ratio, fn_old, cos_turn, kind,
+                    vtri, tri_n, cos_facing, max_sub=16):
+    """The remesh's batch of edge collapses: :func:`greedy_independent_rings` over the
+    candidate edges (``u``, ``v``; ``rank`` higher first; closed 1-rings of both ends as the
+    lock regions), every winner checked in both allowed directions (``dir_ok`` (k, 2): u into
+    v, v into u) by the geometric tests of collapsing a vertex ``a`` into ``b``, in one
+    compiled pass (no call back into Python per sub-round):
+
+    - ``rmax``, the largest ratio of a new edge to the mean local size ``h`` of its ends, at
+      most ``max_len_ratio``;
+    - no face around ``a`` that keeps its area turning its unit normal away from ``fn_old``
+      to a cosine of ``cos_turn`` or less;
+    - no new face standing across the input (:func:`facing_ok` with ``kind``, ``vtri``,
+      ``tri_n``, ``cos_facing``);
+    - the smallest angle of the new faces at least min(5, half the smallest angle of the
+      faces around ``a`` before), in degrees.
+
+    A winner passing in a direction is collapsed, in the direction of the smaller rmax (u into
+    v on a tie). Returns ``(a, b)``: the vertices removed and where each goes, in the order
+    the sub-rounds took them. ``nptr``/``nbr``: vertex neighbours; ``fptr``/``vf``: faces
+    around each vertex; ``F`` (m, 3) faces on the points ``P``. The angles use the C
+    library's atan2 (numpy's AVX-512 loop gives other last bits: see the module's note); a
+    test that an angle equal to the bound to the last bit decides could go the other way."""
+    def i64(x):
+        return np.ascontiguousarray(x, dtype=np.int64)
+
+    def f64(x):
+        return np.ascontiguousarray(x, dtype=np.float64)
+    nptr, nbr, fptr, vf, u, v, kind, vtri = (i64(x) for x in (nptr, nbr, fptr, vf, u, v, kind, vtri))
+    F = i64(F).reshape(-1, 3)
+    P, fn_old, tri_n = (f64(x).reshape(-1, 3) for x in (P, fn_old, tri_n))
+    h = f64(h)
+    dir_ok = np.ascontiguousarray(dir_ok, dtype=np.bool_).reshape(-1, 2)
+    n = len(P)
+    if len(nptr) != n + 1 or len(fptr) != n + 1 or len(h) != n or len(kind) != n or len(vtri) != n \
+            or len(fn_old) != len(F):
+        raise ValueError("collapse_select: arrays of mismatched lengths")
+    if not len(u) == len(v) == len(rank) == len(dir_ok):
+        raise ValueError(f"collapse_select: u, v, rank and dir_ok need one entry per candidate, got {len(u)}, "
+                         f"{len(v)}, {len(rank)} and {len(dir_ok)}")
+    _check_csr(nptr, nbr)
+    if fptr[0] != 0 or fptr[-1] != len(vf) or (np.diff(fptr) < 0).any():
+        raise ValueError("fptr must be CSR row pointers into vf")
+    _check_index("vf", vf, len(F))
+    _check_index("F", F, n)
+    _check_index("u", u, n)
+    _check_index("v", v, n)
+    if len(vtri) and vtri.max(initial=-1) >= len(tri_n):
+        raise ValueError(f"collapse_select: vertex triangles must be below {len(tri_n)}")
+    rank = _dense_rank(rank)
+    ncand = len(rank)
+    if not ncand:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    alive = dir_ok[:, 0] | dir_ok[:, 1]
+    cptr, cres, rptr, rcand = _build_rings(nptr, nbr, u, v, alive, rank, ncand, n)
+    return _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, int(max_sub), nptr, nbr, fptr, vf, F, P,
+                            h, float(max_len_ratio), fn_old, float(cos_turn), kind, vtri, tri_n, float(cos_facing))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -2102,62 +2185,6 @@ def flip_tests(a, b, c, d, P, cosmax, kind, vtri, tri_n, cos_facing):
     if len(vtri) and vtri.max(initial=-1) >= len(tri_n):
         raise ValueError(f"flip_tests: vertex triangles must be below {len(tri_n)}")
     return _flip_tests(a, b, c, d, P, float(cosmax), kind, vtri, tri_n, float(cos_facing))
-
-
-class CollapseTests:
-    """The remesh's geometric tests of collapsing a vertex ``a[i]`` into ``b[i]``, each pair on
-    its own, up to the angles, on one state of the mesh (its arrays are checked once, here;
-    the sub-rounds of a selection then call the object with their pairs):
-
-    - ``rmax``: the largest ratio of a new edge to the mean local size ``h`` of its ends,
-      allowed up to ``max_len_ratio``;
-    - no face around ``a`` that keeps its area turning its unit normal away from ``fn_old`` to
-      a cosine of ``cos_turn`` or less;
-    - no new face standing across the input (:func:`facing_ok` with ``kind``, ``vtri``,
-      ``tri_n``, ``cos_facing``).
-
-    ``tests(a, b, okd)`` returns ``(rmax, ok, own_old, sc_old, own_new, sc_new)``: ``ok`` the
-    pairs (among ``okd``) passing those tests and, for every pair that passed the length test,
-    the :func:`corner_sin_cos` arguments (4, m) of its faces around ``a`` before the collapse
-    (``own_old``: their pair) and after it (``own_new``), for numpy's ``arctan2``. The bits of
-    the numpy formulas of ``remesh._collapse_edges``."""
-
-    def __init__(self, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n,
-                 cos_facing):
-        def i64(x):
-            return np.ascontiguousarray(x, dtype=np.int64)
-
-        def f64(x):
-            return np.ascontiguousarray(x, dtype=np.float64)
-        self.nptr, self.nbr, self.fptr, self.vf, self.kind, self.vtri = (
-            i64(x) for x in (nptr, nbr, fptr, vf, kind, vtri))
-        self.F = i64(F).reshape(-1, 3)
-        self.P, self.fn_old, self.tri_n = (f64(x).reshape(-1, 3) for x in (P, fn_old, tri_n))
-        self.h = f64(h)
-        n = len(self.P)
-        if len(self.nptr) != n + 1 or len(self.fptr) != n + 1 or len(self.h) != n or len(self.kind) != n \
-                or len(self.vtri) != n or len(self.fn_old) != len(self.F):
-            raise ValueError("CollapseTests: arrays of mismatched lengths")
-        _check_csr(self.nptr, self.nbr)
-        if self.fptr[0] != 0 or self.fptr[-1] != len(self.vf) or (np.diff(self.fptr) < 0).any():
-            raise ValueError("fptr must be CSR row pointers into vf")
-        _check_index("vf", self.vf, len(self.F))
-        _check_index("F", self.F, n)
-        if len(self.vtri) and self.vtri.max(initial=-1) >= len(self.tri_n):
-            raise ValueError(f"CollapseTests: vertex triangles must be below {len(self.tri_n)}")
-        self.max_len_ratio, self.cos_turn, self.cos_facing = float(max_len_ratio), float(cos_turn), float(cos_facing)
-
-    def __call__(self, a, b, okd):
-        a = np.ascontiguousarray(a, dtype=np.int64)
-        b = np.ascontiguousarray(b, dtype=np.int64)
-        okd = np.ascontiguousarray(okd, dtype=np.bool_)
-        if not (len(a) == len(b) == len(okd)):
-            raise ValueError("CollapseTests: a, b and okd must have the same length")
-        _check_index("a", a, len(self.h))
-        _check_index("b", b, len(self.h))
-        return _collapse_tests(a, b, okd, self.nptr, self.nbr, self.fptr, self.vf, self.F, self.P, self.h,
-                               self.max_len_ratio, self.fn_old, self.cos_turn, self.kind, self.vtri, self.tri_n,
-                               self.cos_facing)
 
 
 def _rows3(a):
@@ -2360,9 +2387,10 @@ def warm_up() -> float:
     corner_sin_cos(Q[:, 0], Q[:, 1], Q[:, 2])           # the strided corners of a (k, 3, 3) array
     corner_cosines(e[None])
     facing_ok(np.array([[0, 1, 2]]), np.zeros(3, np.int64), np.zeros(3, np.int64), e, e[:1], 0.5)
-    CollapseTests(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]), np.zeros(3, np.int64),
-                  np.array([[0, 1, 2]]), e, np.ones(3), 2.0, e[2:], 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64),
-                  e, 0.2)(np.array([0]), np.array([1]), np.array([True]))
+    collapse_select(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]),
+                    np.zeros(3, np.int64), np.array([[0, 1, 2]]), e, np.ones(3), np.array([0]), np.array([1]),
+                    np.array([1]), np.array([[True, True]]), max_len_ratio=2.0, fn_old=e[2:], cos_turn=0.5,
+                    kind=np.zeros(3, np.int64), vtri=np.zeros(3, np.int64), tri_n=e, cos_facing=0.2)
     flip_tests([0], [1], [2], [0], e, 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64), e, 0.2)
     edge_table(np.array([[0, 1, 2]]), 3)
     edge_lookup(np.array([[0, 1], [0, 2], [1, 2]]), np.array([0, 2, 3, 3]), np.array([0, 2]), np.array([1, 1]))

@@ -38,7 +38,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (CollapseTests, common_neighbour_counts, corner_sin_cos, edge_lookup, edge_table, facing_ok,
+from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lookup, edge_table, facing_ok,
                       flip_tests, greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
@@ -1217,7 +1217,6 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         return 0
     fn_old = _unit(_tri_normals(P, F))
     cos_turn = np.cos(np.radians(max_normal_turn))
-    tests = None
 
     def allowed_only(a, b, okd):
         """:func:`geometric` run on the pairs ``okd`` allows only, inf for the others (they get
@@ -1252,20 +1251,6 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
                 badf[chk] = _dot(nn[chk], ctx.tri_n[ti]) <= 0
             bad = np.bincount(ow, weights=badf, minlength=k) > 0
             return np.where(okd & ~bad, _norm(P[a] - P[b]), np.inf)
-        if not quality:
-            # the length, normal-turn and facing tests and the angles' arguments in one compiled
-            # pass (kernels.CollapseTests), the angles from numpy's arctan2
-            nonlocal tests
-            if tests is None:
-                tests = CollapseTests(nptr, nbr, fptr, vf, F, P, W.h, max_len_ratio, fn_old, cos_turn, W.kind,
-                                      W.vtri, ctx.tri_n, _COS_FACING)
-            rmax, okd, own_old, sc_old, own_new, sc_new = tests(a, b, okd)
-            amin_old = np.full(k, np.inf)
-            np.minimum.at(amin_old, own_old, _min_angle_of(sc_old))
-            amin_new = np.full(k, np.inf)
-            np.minimum.at(amin_new, own_new, _min_angle_of(sc_new))
-            okd &= amin_new >= np.minimum(5.0, 0.5 * amin_old)
-            return np.where(okd, rmax, np.inf)
         ow, pos = _expand(nptr, a)
         xx = nbr[pos]
         m = xx != b[ow]
@@ -1341,11 +1326,19 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             acc_b.append(np.where(d == 0, v[w], u[w]))
         return good
 
-    greedy_independent_rings(nptr, nbr, u, v, _rank(prio, cand), alive=alive, check=check, max_sub=16)
-    if not acc_a:
-        return 0
-    a = np.concatenate(acc_a)
-    b = np.concatenate(acc_b)
+    if check_geometry and not quality:
+        # the sweeps' collapses: the selection and the tests in one compiled pass
+        a, b = collapse_select(nptr, nbr, fptr, vf, F, P, W.h, u, v, _rank(prio, cand), dir_ok,
+                               max_len_ratio=max_len_ratio, fn_old=fn_old, cos_turn=cos_turn, kind=W.kind,
+                               vtri=W.vtri, tri_n=ctx.tri_n, cos_facing=_COS_FACING, max_sub=16)
+        if not len(a):
+            return 0
+    else:
+        greedy_independent_rings(nptr, nbr, u, v, _rank(prio, cand), alive=alive, check=check, max_sub=16)
+        if not acc_a:
+            return 0
+        a = np.concatenate(acc_a)
+        b = np.concatenate(acc_b)
     remap = np.arange(n)
     remap[a] = b
     F2 = remap[F]

@@ -760,12 +760,14 @@ def _old_collapse_geometric(a, b, okd, nptr, nbr, fptr, vf, F, P, h, max_len_rat
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_collapse_tests_match_the_numpy_formulas(seed):
-    """kernels.CollapseTests plus numpy's arctan2 give the remesh's collapse scores (the
-    longest new edge over the local size, inf where a test fails) of the numpy formulas it
-    replaced, on a wavy, jittered grid with every edge offered in both directions."""
-    from shellmesh_mdao.kernels import CollapseTests
-    from shellmesh_mdao.remesh import _Topo, _min_angle_of, _tri_normals, _unit
+def test_collapse_select_matches_the_numpy_formulas(seed):
+    """kernels.collapse_select takes the collapses (vertex removed, where it goes) that the
+    remesh took before: greedy_independent_rings calling back into Python each sub-round with
+    the numpy formulas of the tests (numpy's arctan2 for the angles), both directions of every
+    winner, the smaller longest-new-edge ratio first. On a wavy, jittered grid with a NaN size,
+    a node on top of its neighbour and faces standing across the input."""
+    from shellmesh_mdao.kernels import collapse_select, greedy_independent_rings
+    from shellmesh_mdao.remesh import _Topo, _tri_normals, _unit
 
     rng = np.random.default_rng(seed)
     nx = 14
@@ -787,31 +789,42 @@ def test_collapse_tests_match_the_numpy_formulas(seed):
     kind = rng.integers(0, 3, n)
     tri_n = fn_old[rng.permutation(len(F))] * rng.choice([-1.0, 1.0], (len(F), 1))   # some faces stand across
     vtri = rng.integers(-1, len(F), n)
-    E = T.E
-    a = np.concatenate([E[:, 0], E[:, 1]])
-    b = np.concatenate([E[:, 1], E[:, 0]])
-    okd = rng.random(len(a)) < 0.9
+    u, v = T.E[:, 0], T.E[:, 1]
+    dir_ok = rng.random((len(u), 2)) < 0.8
+    rank = rng.permutation(len(u)) + 1
     # a node on top of its neighbour: collapses next to it make faces of zero area
     P[idx[5, 5]] = P[idx[5, 6]]
     cos_facing = np.cos(np.radians(80.0))
-    for turn in (45.0, 120.0):                           # past 90 degrees only the area guard refuses
+    taken = backward = refused = 0
+    for turn, ratio in ((45.0, 4.0 / 3.0), (120.0, 2.5), (45.0, 2.5)):   # past 90 degrees only the area guard refuses
         cos_turn = np.cos(np.radians(turn))
-        tests = CollapseTests(nptr, nbr, fptr, vf, F, P, h, 4.0 / 3.0, fn_old, cos_turn, kind, vtri, tri_n,
-                              cos_facing)
-        rmax, ok, own_old, sc_old, own_new, sc_new = tests(a, b, okd)
-        amin_old = np.full(len(a), np.inf)
-        np.minimum.at(amin_old, own_old, _min_angle_of(sc_old))
-        amin_new = np.full(len(a), np.inf)
-        np.minimum.at(amin_new, own_new, _min_angle_of(sc_new))
-        ok &= amin_new >= np.minimum(5.0, 0.5 * amin_old)
-        got = np.where(ok, rmax, np.inf)
-        want = _old_collapse_geometric(a, b, okd, nptr, nbr, fptr, vf, F, P, h, 4.0 / 3.0, fn_old, cos_turn,
-                                       kind, vtri, tri_n, cos_facing)
-        np.testing.assert_array_equal(got, want)
-        # allowed and refused collapses both occur
-        assert np.isfinite(got).sum() > 10 and (~np.isfinite(got) & okd).sum() > 50
+        acc_a, acc_b, refusals = [], [], []
+
+        def check(win):
+            sc = _old_collapse_geometric(np.concatenate([u[win], v[win]]), np.concatenate([v[win], u[win]]),
+                                         np.concatenate([dir_ok[win, 0], dir_ok[win, 1]]), nptr, nbr, fptr, vf, F,
+                                         P, h, ratio, fn_old, cos_turn, kind, vtri, tri_n,
+                                         cos_facing).reshape(2, -1).T
+            good = np.isfinite(sc).any(1)
+            refusals.append(good)
+            d = np.argmin(sc[good], axis=1)
+            acc_a.append(np.where(d == 0, u[win[good]], v[win[good]]))
+            acc_b.append(np.where(d == 0, v[win[good]], u[win[good]]))
+            return good
+        greedy_independent_rings(nptr, nbr, u, v, rank, alive=dir_ok.any(1), check=check, max_sub=16)
+        a, b = collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, max_len_ratio=ratio,
+                               fn_old=fn_old, cos_turn=cos_turn, kind=kind, vtri=vtri, tri_n=tri_n,
+                               cos_facing=cos_facing, max_sub=16)
+        np.testing.assert_array_equal(a, np.concatenate(acc_a))
+        np.testing.assert_array_equal(b, np.concatenate(acc_b))
+        taken += len(a)
+        backward += int((a > b).sum())                  # edges are (lower, higher): v into u
+        refused += sum(int((~g).sum()) for g in refusals)
+    # collapses taken in both directions, and winners refused by the tests
+    assert taken > 15 and backward > 5 and refused > 50
     with pytest.raises(ValueError):
-        tests(a, np.full(len(a), n), okd)
+        collapse_select(nptr, nbr, fptr, vf, F, P, h, u, np.full(len(u), n), rank, dir_ok, max_len_ratio=2.0,
+                        fn_old=fn_old, cos_turn=0.5, kind=kind, vtri=vtri, tri_n=tri_n, cos_facing=cos_facing)
 
 
 @pytest.mark.parametrize("seed", range(4))
