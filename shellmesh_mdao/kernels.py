@@ -37,7 +37,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
            "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_tests",
+           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates",
            "warm_up"]
 
 
@@ -2138,53 +2138,113 @@ def _tri_args(A, B, C, out, j, i):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _flip_tests(a, b, c, d, P, cosmax, kind, vtri, tri_n, cos_facing):
-    k = a.shape[0]
-    ok = np.empty(k, np.bool_)
-    m0 = np.empty((k, 3))
-    m1 = np.empty((k, 3))
-    sc = np.empty((4, 4, k))
-    for i in range(k):
-        Pa, Pb, Pc, Pd = P[a[i]], P[b[i]], P[c[i]], P[d[i]]
+def _flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, cosmax, kind, vtri, tri_n, cos_facing, valence, deg, tgt):
+    ne = E.shape[0]
+    out_e = np.empty(ne, np.int64)
+    abcd = np.empty((ne, 4), np.int64)
+    ff = np.empty((ne, 2), np.int64)
+    gains = np.empty(ne)
+    m0 = np.empty((ne, 3))
+    m1 = np.empty((ne, 3))
+    sc = np.empty((4, 4, ne))
+    k = 0
+    for e in range(ne):
+        if h1[e] < 0 or isf[e]:
+            continue
+        f0, s0 = h0[e] // 3, h0[e] % 3
+        f1, s1 = h1[e] // 3, h1[e] % 3
+        a = F[f0, s0]
+        b = F[f0, (s0 + 1) % 3]
+        c = F[f0, (s0 + 2) % 3]
+        d = F[f1, (s1 + 2) % 3]
+        if c == d or fpatch[f0] != fpatch[f1]:
+            continue
+        lo, hi = (c, d) if c <= d else (d, c)
+        found = False
+        for x in range(kptr[lo], kptr[lo + 1]):
+            if E[x, 1] == hi:
+                found = True
+                break
+        if found:
+            continue
+        gain = 0.0
+        if valence:
+            ea, eb, ec, ed = deg[a] - tgt[a], deg[b] - tgt[b], deg[c] - tgt[c], deg[d] - tgt[d]
+            before = ea * ea + eb * eb + ec * ec + ed * ed
+            xa, xb = deg[a] + -1.0 - tgt[a], deg[b] + -1.0 - tgt[b]
+            xc, xd = deg[c] + 1.0 - tgt[c], deg[d] + 1.0 - tgt[d]
+            after = xa * xa + xb * xb + xc * xc + xd * xd
+            gain = before - after
+            if not gain > 0:
+                continue
+        Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
         x0, x1, x2 = _unit_normal(Pa, Pb, Pc)
         y0, y1, y2 = _unit_normal(Pb, Pa, Pd)
-        g = _dot3e(x0, x1, x2, y0, y1, y2) > cosmax
+        if not _dot3e(x0, x1, x2, y0, y1, y2) > cosmax:
+            continue
         p0, p1, p2 = _unit_normal(Pa, Pd, Pc)
         q0, q1, q2 = _unit_normal(Pd, Pb, Pc)
-        m0[i, 0], m0[i, 1], m0[i, 2] = p0, p1, p2
-        m1[i, 0], m1[i, 1], m1[i, 2] = q0, q1, q2
-        g = g and _dot3e(p0, p1, p2, x0, x1, x2) > cosmax and _dot3e(p0, p1, p2, y0, y1, y2) > cosmax
-        g = g and _dot3e(q0, q1, q2, x0, x1, x2) > cosmax and _dot3e(q0, q1, q2, y0, y1, y2) > cosmax
-        g = g and _facing_one(a[i], d[i], c[i], kind, vtri, tri_n, p0, p1, p2, cos_facing)
-        g = g and _facing_one(d[i], b[i], c[i], kind, vtri, tri_n, q0, q1, q2, cos_facing)
-        ok[i] = g
-        _tri_args(Pa, Pb, Pc, sc, 0, i)
-        _tri_args(Pb, Pa, Pd, sc, 1, i)
-        _tri_args(Pa, Pd, Pc, sc, 2, i)
-        _tri_args(Pd, Pb, Pc, sc, 3, i)
-    return ok, m0, m1, sc
+        if not (_dot3e(p0, p1, p2, x0, x1, x2) > cosmax and _dot3e(p0, p1, p2, y0, y1, y2) > cosmax
+                and _dot3e(q0, q1, q2, x0, x1, x2) > cosmax and _dot3e(q0, q1, q2, y0, y1, y2) > cosmax):
+            continue
+        if not (_facing_one(a, d, c, kind, vtri, tri_n, p0, p1, p2, cos_facing)
+                and _facing_one(d, b, c, kind, vtri, tri_n, q0, q1, q2, cos_facing)):
+            continue
+        out_e[k] = e
+        abcd[k, 0], abcd[k, 1], abcd[k, 2], abcd[k, 3] = a, b, c, d
+        ff[k, 0], ff[k, 1] = f0, f1
+        gains[k] = gain
+        _tri_args(Pa, Pb, Pc, sc, 0, k)
+        _tri_args(Pb, Pa, Pd, sc, 1, k)
+        _tri_args(Pa, Pd, Pc, sc, 2, k)
+        _tri_args(Pd, Pb, Pc, sc, 3, k)
+        m0[k, 0], m0[k, 1], m0[k, 2] = p0, p1, p2
+        m1[k, 0], m1[k, 1], m1[k, 2] = q0, q1, q2
+        k += 1
+    return out_e[:k], abcd[:k], ff[:k], gains[:k], m0[:k], m1[:k], sc[:, :, :k]
 
 
-def flip_tests(a, b, c, d, P, cosmax, kind, vtri, tri_n, cos_facing):
-    """The remesh's geometric tests of flipping edge a-b of the triangles (a, b, c) and
-    (b, a, d) to c-d, each flip on its own: the two old faces' unit normals within ``cosmax``
-    (a cosine) of each other and of both new faces' normals ``m0`` (of (a, d, c)) and ``m1``
-    (of (d, b, c)), and neither new face standing across the input (:func:`facing_ok`).
-    Returns ``(ok, m0, m1, sc)`` with ``sc`` (4, 4, k) the :func:`corner_sin_cos` arguments of
-    the triangles (a, b, c), (b, a, d), (a, d, c) and (d, b, c), for numpy's ``arctan2``. The
+def flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, cosmax, kind, vtri, tri_n, cos_facing, deg=None, tgt=None):
+    """The remesh's edge flips allowed on their own, up to the angles, in one pass over the
+    edge table (``E`` (e, 2) rows ``(lo, hi)`` sorted, ``kptr`` as in :func:`edge_lookup`;
+    ``h0``/``h1`` each edge's half-edges ``3 f + slot``, ``h1 < 0`` on a border; ``isf`` the
+    feature edges, never flipped). Edge a-b of the triangles (a, b, c) and (b, a, d) may become
+    c-d when c != d, c-d is not an edge yet, both faces are on one patch (``fpatch``), with
+    ``deg``/``tgt`` (valence mode) the squared distances of the four valences ``deg`` to their
+    targets ``tgt`` fall (``gain > 0``), and the old pair's unit normals are within ``cosmax`` (a
+    cosine) of each other, both new faces' normals within it of both old ones, and neither new
+    face stands across the input (:func:`facing_ok`).
+
+    Returns, for those flips in edge order, ``(edge, abcd (k, 4), faces (k, 2), gain, m0, m1,
+    sc)``: ``gain`` the valence gain (0 without ``deg``), ``m0``/``m1`` the unit normals of the
+    new faces (a, d, c) and (d, b, c), ``sc`` (4, 4, k) the :func:`corner_sin_cos` arguments of
+    the triangles (a, b, c), (b, a, d), (a, d, c) and (d, b, c) for numpy's ``arctan2``. The
     bits of the numpy formulas of ``remesh._flip_round``."""
-    a, b, c, d = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (a, b, c, d))
+    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
+    kptr, h0, h1, fpatch, kind, vtri = (np.ascontiguousarray(x, dtype=np.int64)
+                                        for x in (kptr, h0, h1, fpatch, kind, vtri))
+    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
-    kind = np.ascontiguousarray(kind, dtype=np.int64)
-    vtri = np.ascontiguousarray(vtri, dtype=np.int64)
     tri_n = np.ascontiguousarray(tri_n, dtype=np.float64).reshape(-1, 3)
-    if not (len(a) == len(b) == len(c) == len(d)) or len(kind) != len(P) or len(vtri) != len(P):
-        raise ValueError("flip_tests: a, b, c, d of one length; kind and vtri one per point")
-    for name, x in (("a", a), ("b", b), ("c", c), ("d", d)):
-        _check_index(name, x, len(P))
-    if len(vtri) and vtri.max(initial=-1) >= len(tri_n):
-        raise ValueError(f"flip_tests: vertex triangles must be below {len(tri_n)}")
-    return _flip_tests(a, b, c, d, P, float(cosmax), kind, vtri, tri_n, float(cos_facing))
+    isf = np.ascontiguousarray(isf, dtype=np.bool_)
+    n = len(P)
+    valence = deg is not None
+    deg = np.ascontiguousarray(deg if valence else np.zeros(n), dtype=np.float64)
+    tgt = np.ascontiguousarray(tgt if valence else np.zeros(n), dtype=np.float64)
+    if not (len(h0) == len(h1) == len(isf) == len(E)) or len(kptr) != n + 1 or len(fpatch) != len(F) \
+            or len(kind) != n or len(vtri) != n or len(deg) != n or len(tgt) != n:
+        raise ValueError("flip_candidates: arrays of mismatched lengths")
+    _check_index("E", E, n)
+    _check_index("F", F, n)
+    if kptr[0] != 0 or kptr[-1] != len(E) or (np.diff(kptr) < 0).any():
+        raise ValueError("kptr must be row pointers into E")
+    _check_index("h0", h0, 3 * len(F))
+    if h1.max(initial=-1) >= 3 * len(F):
+        raise ValueError(f"h1 must be below {3 * len(F)}")
+    if vtri.max(initial=-1) >= len(tri_n):
+        raise ValueError(f"flip_candidates: vertex triangles must be below {len(tri_n)}")
+    return _flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, float(cosmax), kind, vtri, tri_n, float(cos_facing),
+                            valence, deg, tgt)
 
 
 def _rows3(a):
@@ -2391,7 +2451,12 @@ def warm_up() -> float:
                     np.zeros(3, np.int64), np.array([[0, 1, 2]]), e, np.ones(3), np.array([0]), np.array([1]),
                     np.array([1]), np.array([[True, True]]), max_len_ratio=2.0, fn_old=e[2:], cos_turn=0.5,
                     kind=np.zeros(3, np.int64), vtri=np.zeros(3, np.int64), tri_n=e, cos_facing=0.2)
-    flip_tests([0], [1], [2], [0], e, 0.5, np.zeros(3, np.int64), np.zeros(3, np.int64), e, 0.2)
+    Fq = np.array([[0, 1, 2], [1, 0, 3]])
+    for dg in (None, np.full(4, 3.0)):
+        flip_candidates(np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3]]), np.array([0, 3, 5, 5, 5]),
+                        np.array([0, 2, 4, 1, 5]), np.array([3, -1, -1, -1, -1]), np.zeros(5, bool), Fq,
+                        np.zeros(2, np.int64), np.vstack([e, [1.0, -1.0, 0.0]]), 0.5, np.zeros(4, np.int64),
+                        np.zeros(4, np.int64), e, 0.2, dg, dg)
     edge_table(np.array([[0, 1, 2]]), 3)
     edge_lookup(np.array([[0, 1], [0, 2], [1, 2]]), np.array([0, 2, 3, 3]), np.array([0, 2]), np.array([1, 1]))
     return time.perf_counter() - t0

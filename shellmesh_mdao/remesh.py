@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
 from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lookup, edge_table, facing_ok,
-                      flip_tests, greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
+                      flip_candidates, greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -152,13 +152,17 @@ class _Topo:
         self._vf = None
         self._kptr = None
 
+    def kptr(self):
+        """Row pointers of each lower end's edges in ``E`` (E's rows are sorted by key
+        lo * n + hi, so by lo: each lo's rows are one run)."""
+        if self._kptr is None:
+            self._kptr = np.concatenate([[0], np.cumsum(np.bincount(self.E[:, 0], minlength=self.n))])
+        return self._kptr
+
     def lookup(self, u, v):
         """Edge id of node pairs (u, v), -1 where absent (a compiled scan of the few edges
         whose lower end is ``min(u, v)``: :func:`~shellmesh_mdao.kernels.edge_lookup`)."""
-        if self._kptr is None:
-            # E's rows are sorted by key lo * n + hi, so by lo: each lo's rows are one run
-            self._kptr = np.concatenate([[0], np.cumsum(np.bincount(self.E[:, 0], minlength=self.n))])
-        return edge_lookup(self.E, self._kptr, np.asarray(u).reshape(-1), np.asarray(v).reshape(-1))
+        return edge_lookup(self.E, self.kptr(), np.asarray(u).reshape(-1), np.asarray(v).reshape(-1))
 
     def vertex_neighbors(self):
         """CSR (ptr, nbr) of vertex neighbours."""
@@ -1364,17 +1368,7 @@ def _flip_round(W, ctx, mode):
     F = W.F
     P = W.P
     isf, _ = W.feature_lookup(T)
-    cand = np.flatnonzero((T.h1 >= 0) & ~isf)
-    if not len(cand):
-        return 0
-    h0, h1 = T.h0[cand], T.h1[cand]
-    f0, s0 = h0 // 3, h0 % 3
-    f1, s1 = h1 // 3, h1 % 3
-    a = F[f0, s0]
-    b = F[f0, (s0 + 1) % 3]
-    c = F[f0, (s0 + 2) % 3]
-    d = F[f1, (s1 + 2) % 3]
-    ok = (c != d) & (T.lookup(c, d) < 0) & (W.fpatch[f0] == W.fpatch[f1])
+    deg = tgt = None
     if mode == "valence":
         nptr, _ = T.vertex_neighbors()
         deg = np.diff(nptr).astype(np.float64)
@@ -1387,36 +1381,25 @@ def _flip_round(W, ctx, mode):
         tgt = np.clip(np.round(asum / (np.pi / 3.0)), 2.0, 9.0)
         bnd = T.valence == 1
         tgt[E[bnd].reshape(-1)] += 1.0
-
-        def en(vtx, dd):
-            return (deg[vtx] + dd - tgt[vtx]) ** 2
-        before = en(a, 0) + en(b, 0) + en(c, 0) + en(d, 0)
-        after = en(a, -1) + en(b, -1) + en(c, 1) + en(d, 1)
-        gain = before - after
-        ok &= gain > 0
-    # the geometric tests only for the flips the topological ones allow (each flip's answer
-    # does not depend on the others)
-    keep = np.flatnonzero(ok)
-    cand, a, b, c, d, f0, f1, ok = cand[keep], a[keep], b[keep], c[keep], d[keep], f0[keep], f1[keep], ok[keep]
-    # in one compiled pass (kernels.flip_tests): the old pair nearly coplanar, the new pair not
-    # folded over the old one (both new faces turn by less than the allowed dihedral from both
-    # old faces) nor standing across the input; the angles' arguments of all four faces
+    # in one compiled pass (kernels.flip_candidates): c-d not an edge yet, one patch, the
+    # valence gain (mode 'valence'), the old pair nearly coplanar, the new pair not folded over
+    # the old one (both new faces turn by less than the allowed dihedral from both old faces)
+    # nor standing across the input; the angles' arguments of all four faces
     cosmax = np.cos(np.radians(ctx.max_flip_dihedral))
-    ok2, m0, m1, sc = flip_tests(a, b, c, d, P, cosmax, W.kind, W.vtri, ctx.tri_n, _COS_FACING)
-    ok &= ok2
-    k2 = np.flatnonzero(ok)                  # and the angles only for the flips still allowed
-    cand, a, b, c, d, f0, f1 = (x[k2] for x in (cand, a, b, c, d, f0, f1))
-    m0, m1, sc = m0[k2], m1[k2], sc[:, :, k2]
-    keep, ok = keep[k2], ok[k2]
+    cand, abcd, ff, gain, m0, m1, sc = flip_candidates(E, T.kptr(), T.h0, T.h1, isf, F, W.fpatch, P, cosmax,
+                                                       W.kind, W.vtri, ctx.tri_n, _COS_FACING, deg, tgt)
+    if not len(cand):
+        return 0
+    a, b, c, d = abcd.T
+    f0, f1 = ff.T
     old = np.minimum(_min_angle_of(sc[0]), _min_angle_of(sc[1]))
     new = np.minimum(_min_angle_of(sc[2]), _min_angle_of(sc[3]))
     if mode == "valence":
-        gain = gain[keep]
-        ok &= new >= 0.5 * old
+        ok = new >= 0.5 * old
         prio = gain + 1e-3 * (new - old)
     else:
         gain = new - old
-        ok &= gain > 1e-3
+        ok = gain > 1e-3
         prio = gain
     if ctx.delta is not None and ok.any():
         # remeshing: the new edge must stay within max_deviation of the input, and the new

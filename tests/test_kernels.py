@@ -828,43 +828,82 @@ def test_collapse_select_matches_the_numpy_formulas(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_flip_tests_match_the_numpy_formulas(seed):
-    """kernels.flip_tests gives the remesh's flip tests and angle arguments of the numpy
-    formulas it replaced (dihedrals of the old and new pairs, facing), on random quadruples
-    of a wavy point set with coincident points and faces standing across."""
-    from shellmesh_mdao.kernels import flip_tests
-    from shellmesh_mdao.remesh import _min_angle_of, _unit
+def test_flip_candidates_match_the_numpy_formulas(seed):
+    """kernels.flip_candidates gives the flips, valence gains, new normals and angle arguments
+    of the remesh's numpy formulas it replaced (c-d not an edge yet, one patch, the valence
+    gain, the dihedrals of the old and new pairs, facing), on a wavy, jittered grid with a
+    tetrahedron beside it (whose flips would create existing edges), a node on top of its
+    neighbour, feature edges, two patches and faces standing across."""
+    from shellmesh_mdao.kernels import flip_candidates
+    from shellmesh_mdao.remesh import _min_angle_of, _Topo, _unit
 
     rng = np.random.default_rng(seed)
-    n, k = 80, 3000
-    P = rng.normal(size=(n, 3)) * [3.0, 3.0, 0.4]
-    P[7] = P[8]
-    a, b, c, d = (rng.integers(0, n, k) for _ in range(4))
+    nx = 14
+    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
+    g += rng.uniform(-0.3, 0.3, g.shape)
+    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
+    idx = np.arange(nx * nx).reshape(nx, nx)
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    flip = rng.random(len(q)) < 0.5
+    F = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
+                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    t0 = len(P)
+    P = np.vstack([P, [[20.0, 0, 0], [21.0, 0, 0], [20.0, 1.0, 0], [20.0, 0, 1.0]]])
+    F = np.vstack([F, t0 + np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])])
+    P[idx[5, 5]] = P[idx[5, 6]]
+    n, m = len(P), len(F)
+    T = _Topo(F, n)
+    E = T.E
+    isf = rng.random(len(E)) < 0.1
+    fpatch = (rng.random(m) < 0.1).astype(np.int64)
     kind = rng.integers(0, 3, n)
-    tri_n = _unit(rng.normal(size=(50, 3)) * [0.3, 0.3, 1.0])
-    tri_n[5] = np.nan
-    vtri = rng.integers(-1, 50, n)
-    cosmax, cos_facing = np.cos(np.radians(120.0)), np.cos(np.radians(80.0))
-    ok, m0, m1, sc = flip_tests(a, b, c, d, P, cosmax, kind, vtri, tri_n, cos_facing)
+    tri_n = _unit(np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]))
+    tri_n = tri_n[rng.permutation(m)] * rng.choice([-1.0, 1.0], (m, 1))
+    vtri = rng.integers(-1, m, n)
+    cosmax, cos_facing = np.cos(np.radians(30.0 + 40.0 * seed)), np.cos(np.radians(80.0))
+    deg = np.diff(T.vertex_neighbors()[0]).astype(np.float64)
+    tgt = rng.integers(4, 8, n).astype(np.float64)
+    # the numpy formulas
+    cand = np.flatnonzero((T.h1 >= 0) & ~isf)
+    h0, h1 = T.h0[cand], T.h1[cand]
+    f0, f1 = h0 // 3, h1 // 3
+    a, b = F[f0, h0 % 3], F[f0, (h0 % 3 + 1) % 3]
+    c, d = F[f0, (h0 % 3 + 2) % 3], F[f1, (h1 % 3 + 2) % 3]
+    topo = (c != d) & (T.lookup(c, d) < 0) & (fpatch[f0] == fpatch[f1])
     Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
     with np.errstate(all="ignore"):
         n0 = _unit(np.cross(Pb - Pa, Pc - Pa))
         n1 = _unit(np.cross(Pa - Pb, Pd - Pb))
-        want = np.einsum("ij,ij->i", n0, n1) > cosmax
+        geo = np.einsum("ij,ij->i", n0, n1) > cosmax
         w0 = _unit(np.cross(Pd - Pa, Pc - Pa))
         w1 = _unit(np.cross(Pb - Pd, Pc - Pd))
         for mm in (w0, w1):
-            want &= (np.einsum("ij,ij->i", mm, n0) > cosmax) & (np.einsum("ij,ij->i", mm, n1) > cosmax)
+            geo &= (np.einsum("ij,ij->i", mm, n0) > cosmax) & (np.einsum("ij,ij->i", mm, n1) > cosmax)
         for Fn, mm in ((np.stack([a, d, c], 1), w0), (np.stack([d, b, c], 1), w1)):
             reg = (kind[Fn] == 0) & (vtri[Fn] >= 0)
             dd = np.einsum("kj,kij->ki", mm, tri_n[np.maximum(vtri[Fn], 0)])
-            want &= ~reg.any(1) | (np.where(reg, dd, -2.0).max(1) > cos_facing)
-        np.testing.assert_array_equal(ok, want)
-        _same(m0, w0)
-        _same(m1, w1)
+            geo &= ~reg.any(1) | (np.where(reg, dd, -2.0).max(1) > cos_facing)
+
+    def en(vtx, k):
+        return (deg[vtx] + k - tgt[vtx]) ** 2
+    gain = en(a, 0) + en(b, 0) + en(c, 0) + en(d, 0) - (en(a, -1) + en(b, -1) + en(c, 1) + en(d, 1))
+    assert (~(c != d) | ~(T.lookup(c, d) < 0)).any()     # the tetrahedron's flips are refused
+    for valence in (False, True):
+        ok = topo & geo & (gain > 0 if valence else True)
+        got = flip_candidates(E, T.kptr(), T.h0, T.h1, isf, F, fpatch, P, cosmax, kind, vtri, tri_n, cos_facing,
+                              deg if valence else None, tgt if valence else None)
+        e, abcd, ff, gn, m0, m1, sc = got
+        np.testing.assert_array_equal(e, cand[ok])
+        np.testing.assert_array_equal(abcd, np.stack([a, b, c, d], 1)[ok])
+        np.testing.assert_array_equal(ff, np.stack([f0, f1], 1)[ok])
+        np.testing.assert_array_equal(gn, gain[ok] if valence else np.zeros(ok.sum()))
+        _same(m0, w0[ok])
+        _same(m1, w1[ok])
         for j, (A, B, C) in enumerate(((Pa, Pb, Pc), (Pb, Pa, Pd), (Pa, Pd, Pc), (Pd, Pb, Pc))):
-            _same(_min_angle_of(sc[j]), _old_tri_min_angle(A, B, C))
-    assert 0.05 < ok.mean() < 0.95
+            _same(_min_angle_of(sc[j]), _old_tri_min_angle(A[ok], B[ok], C[ok]))
+        assert 10 < ok.sum() < 0.9 * len(cand)
+    with pytest.raises(ValueError):
+        flip_candidates(E, T.kptr(), T.h0, T.h1, isf, F, fpatch, P[:-1], cosmax, kind, vtri, tri_n, cos_facing)
 
 
 @pytest.mark.parametrize("seed", range(3))
