@@ -30,8 +30,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import (centroid_d2, chain_walk, corner_cosines, greedy_independent, segments_scan, segments_within,
-                      stable_pair_order)
+from .kernels import (centroid_d2, chain_walk, corner_cosines, edge_lookup, edge_table, greedy_independent,
+                      segments_scan, segments_within, skin_flips)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
@@ -1313,63 +1313,31 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0, active=None
     when the new pair's minimum angle beats the old by ``min_gain`` degrees, the two
     triangles are nearly coplanar (dihedral below ``max_dihedral``), both new triangles keep
     the old orientation and the new edge does not exist yet. Returns ``(T, n_flipped)``."""
-    a, b = T, np.roll(T, -1, axis=1)
-    lo, hi = np.minimum(a, b).ravel(), np.maximum(a, b).ravel()
     n = len(P)
-    key = lo * n + hi
-    order = stable_pair_order(lo, hi, n)
-    ks = key[order]
-    same = np.flatnonzero(ks[1:] == ks[:-1])
-    if not len(same):
-        return T, 0
-    # keep only edges with exactly two half-edges (ks is sorted: its runs are the edges)
-    start = np.r_[True, ks[1:] != ks[:-1]]
-    uk = ks[start]
-    run = np.cumsum(start) - 1
-    cnt = np.diff(np.append(np.flatnonzero(start), len(ks)))
-    same = same[cnt[run[same]] == 2]
-    h0, h1 = order[same], order[same + 1]
-    ek = key[h0]
+    # in one compiled pass over the edge table (kernels.skin_flips): two consistently oriented
+    # triangles on a free edge, both ends active, nearly coplanar (dihedral below
+    # max_dihedral), the new edge not there yet; whether both new triangles keep the pair's
+    # orientation and stay within max_dihedral of its mean normal (a thin new triangle spanning
+    # a bend, three close vertices of one chain around a rounded leading edge, would lie in the
+    # member plane, across the skin); the angles' cosines of the old and new triangles
+    _, h0, h1, cnt, E, _ = edge_table(T, n)
+    kptr = np.concatenate([[0], np.cumsum(np.bincount(E[:, 0], minlength=n))])
+    locked = np.zeros(len(E), bool)
     if len(locked_edges):
-        lk = np.sort(np.asarray(locked_edges), axis=1)
-        free = ~_in_sorted(ek, np.sort(lk[:, 0] * n + lk[:, 1]))
-        h0, h1, ek = h0[free], h1[free], ek[free]
-    f0, s0 = h0 // 3, h0 % 3
-    f1, s1 = h1 // 3, h1 % 3
-    # triangle f0 = (p, q, r) with edge p->q at side s0; f1 has q->p; opposite vertices r, s
-    p = T[f0, s0]
-    q = T[f0, (s0 + 1) % 3]
-    r = T[f0, (s0 + 2) % 3]
-    s = T[f1, (s1 + 2) % 3]
-    ok = (T[f1, s1] == q) & (T[f1, (s1 + 1) % 3] == p) & (r != s)
-    if active is not None:
-        ok &= active[p] & active[q]
-    p, q, r, s, f0, f1 = p[ok], q[ok], r[ok], s[ok], f0[ok], f1[ok]
-    n0 = cross_rows(P[q] - P[p], P[r] - P[p])
-    n1 = cross_rows(P[p] - P[q], P[s] - P[q])
-    cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(norm_rows(n0, axis=1) * norm_rows(n1, axis=1), 1e-300)
+        lk = np.asarray(locked_edges).reshape(-1, 2)
+        e = edge_lookup(E, kptr, lk[:, 0], lk[:, 1])
+        locked[e[e >= 0]] = True
+    cmax = np.cos(np.radians(max_dihedral))
+    pqrs, ff, orient, cos = skin_flips(E, kptr, h0, h1, cnt, locked, T, P, cmax, active)
+    p, q, r, s = pqrs.T
+    f0, f1 = ff.T
     new_key = np.minimum(r, s) * n + np.maximum(r, s)
-    # the angle tests only for the pairs the dihedral and new-edge tests allow (each pair's
-    # answer does not depend on the others)
-    pre = np.flatnonzero((cosd > np.cos(np.radians(max_dihedral))) & ~_in_sorted(new_key, uk))
-    p, q, r, s, f0, f1, n0, n1, new_key = (x[pre] for x in (p, q, r, s, f0, f1, n0, n1, new_key))
     # (p, q, r) and (q, p, s) are the triangles f0 and f1 themselves, rotated: the same angles
-    old_min = np.minimum(_tri_angles_min(P, T[f0]), _tri_angles_min(P, T[f1]))
+    old_min = np.minimum(_min_angle_from_cos(cos[0]), _min_angle_from_cos(cos[1]))
     t0 = np.stack([r, s, q], 1)
     t1 = np.stack([s, r, p], 1)
-    new_min = np.minimum(_tri_angles_min(P, t0), _tri_angles_min(P, t1))
-    nn0 = cross_rows(P[t0[:, 1]] - P[t0[:, 0]], P[t0[:, 2]] - P[t0[:, 0]])
-    nn1 = cross_rows(P[t1[:, 1]] - P[t1[:, 0]], P[t1[:, 2]] - P[t1[:, 0]])
-    navg = n0 / np.maximum(norm_rows(n0, axis=1, keepdims=True), 1e-300) + \
-        n1 / np.maximum(norm_rows(n1, axis=1, keepdims=True), 1e-300)
-    good = new_min > old_min + min_gain
-    # both new triangles keep the pair's orientation and stay within max_dihedral of its mean
-    # normal: a thin new triangle spanning a bend (three close vertices of one chain around a
-    # rounded leading edge) would lie in the member plane, across the skin
-    cmax = np.cos(np.radians(max_dihedral))
-    un = navg / np.maximum(norm_rows(navg, axis=1, keepdims=True), 1e-300)
-    good &= np.einsum("ij,ij->i", nn0, un) > cmax * norm_rows(nn0, axis=1)
-    good &= np.einsum("ij,ij->i", nn1, un) > cmax * norm_rows(nn1, axis=1)
+    new_min = np.minimum(_min_angle_from_cos(cos[2]), _min_angle_from_cos(cos[3]))
+    good = (new_min > old_min + min_gain) & orient
     cand = np.flatnonzero(good)
     if not len(cand):
         return T, 0
@@ -1544,7 +1512,12 @@ def _angles3(Pn):
     """Smallest interior angle (degrees) of triangles given by corner coordinates (t, 3, 3)."""
     # the cosines from a compiled loop (einsum's dot over max(|u| |v|, 1e-300)), the angles
     # from numpy's arccos
-    ang = np.degrees(np.arccos(np.clip(corner_cosines(Pn), -1, 1)))
+    return _min_angle_from_cos(corner_cosines(Pn))
+
+
+def _min_angle_from_cos(c):
+    """Smallest angle (degrees) of triangles from their (t, 3) corner cosines (numpy's arccos)."""
+    ang = np.degrees(np.arccos(np.clip(c, -1, 1)))
     return np.minimum(np.minimum(ang[:, 0], ang[:, 1]), ang[:, 2])
 
 

@@ -37,7 +37,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
            "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates",
+           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips",
            "warm_up"]
 
 
@@ -2247,6 +2247,123 @@ def flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, cosmax, kind, vtri, tri_
                             valence, deg, tgt)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cross3(a0, a1, a2, b0, b1, b2):
+    """cross_rows' arithmetic on one row."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _norm3(x, y, z):
+    """norm_rows' sum on one row."""
+    return np.sqrt(x * x + y * y + z * z)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _corner_cos_row(P, a, b, c, out, i):
+    """corner_cosines of triangle (P[a], P[b], P[c]) into out[i]."""
+    X = (P[a], P[b], P[c])
+    for j in range(3):
+        p = j
+        q = 1 if j == 0 else 0
+        r = 1 if j == 2 else 2
+        u0, u1, u2 = X[q][0] - X[p][0], X[q][1] - X[p][1], X[q][2] - X[p][2]
+        v0, v1, v2 = X[r][0] - X[p][0], X[r][1] - X[p][1], X[r][2] - X[p][2]
+        den = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2) * np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        if den < 1e-300:
+            den = 1e-300
+        out[i, j] = _dot3e(u0, u1, u2, v0, v1, v2) / den
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _skin_flips(E, kptr, h0, h1, cnt, locked, T, P, active, cmax):
+    ne = E.shape[0]
+    pqrs = np.empty((ne, 4), np.int64)
+    ff = np.empty((ne, 2), np.int64)
+    orient = np.empty(ne, np.bool_)
+    cos = np.empty((4, ne, 3))
+    k = 0
+    for e in range(ne):
+        if cnt[e] != 2 or locked[e]:
+            continue
+        f0, s0 = h0[e] // 3, h0[e] % 3
+        f1, s1 = h1[e] // 3, h1[e] % 3
+        p, q, r = T[f0, s0], T[f0, (s0 + 1) % 3], T[f0, (s0 + 2) % 3]
+        s = T[f1, (s1 + 2) % 3]
+        if not (T[f1, s1] == q and T[f1, (s1 + 1) % 3] == p and r != s):
+            continue
+        if active.shape[0] and not (active[p] and active[q]):
+            continue
+        Pp, Pq, Pr, Ps = P[p], P[q], P[r], P[s]
+        a0, a1, a2 = _cross3(Pq[0] - Pp[0], Pq[1] - Pp[1], Pq[2] - Pp[2], Pr[0] - Pp[0], Pr[1] - Pp[1], Pr[2] - Pp[2])
+        b0, b1, b2 = _cross3(Pp[0] - Pq[0], Pp[1] - Pq[1], Pp[2] - Pq[2], Ps[0] - Pq[0], Ps[1] - Pq[1], Ps[2] - Pq[2])
+        la, lb = _norm3(a0, a1, a2), _norm3(b0, b1, b2)
+        den = la * lb
+        if den < 1e-300:
+            den = 1e-300
+        if not _dot3e(a0, a1, a2, b0, b1, b2) / den > cmax:
+            continue
+        lo, hi = (r, s) if r <= s else (s, r)
+        found = False
+        for x in range(kptr[lo], kptr[lo + 1]):
+            if E[x, 1] == hi:
+                found = True
+                break
+        if found:
+            continue
+        # the new pair (r, s, q), (s, r, p) against the pair's mean unit normal
+        c0, c1, c2 = _cross3(Ps[0] - Pr[0], Ps[1] - Pr[1], Ps[2] - Pr[2], Pq[0] - Pr[0], Pq[1] - Pr[1], Pq[2] - Pr[2])
+        d0, d1, d2 = _cross3(Pr[0] - Ps[0], Pr[1] - Ps[1], Pr[2] - Ps[2], Pp[0] - Ps[0], Pp[1] - Ps[1], Pp[2] - Ps[2])
+        ma = la if la >= 1e-300 or la != la else 1e-300
+        mb = lb if lb >= 1e-300 or lb != lb else 1e-300
+        g0, g1, g2 = a0 / ma + b0 / mb, a1 / ma + b1 / mb, a2 / ma + b2 / mb
+        lg = _norm3(g0, g1, g2)
+        if lg < 1e-300:
+            lg = 1e-300
+        u0, u1, u2 = g0 / lg, g1 / lg, g2 / lg
+        orient[k] = (_dot3e(c0, c1, c2, u0, u1, u2) > cmax * _norm3(c0, c1, c2)) and \
+            (_dot3e(d0, d1, d2, u0, u1, u2) > cmax * _norm3(d0, d1, d2))
+        pqrs[k, 0], pqrs[k, 1], pqrs[k, 2], pqrs[k, 3] = p, q, r, s
+        ff[k, 0], ff[k, 1] = f0, f1
+        _corner_cos_row(P, T[f0, 0], T[f0, 1], T[f0, 2], cos[0], k)
+        _corner_cos_row(P, T[f1, 0], T[f1, 1], T[f1, 2], cos[1], k)
+        _corner_cos_row(P, r, s, q, cos[2], k)
+        _corner_cos_row(P, s, r, p, cos[3], k)
+        k += 1
+    return pqrs[:k], ff[:k], orient[:k], cos[:, :k]
+
+
+def skin_flips(E, kptr, h0, h1, cnt, locked, T, P, cmax, active=None):
+    """The imprint's angle-improving flips allowed on their own, up to the angles, in one pass
+    over the edge table of the triangles ``T`` (:func:`edge_table`'s ``E``, ``h0``, ``h1``,
+    ``cnt``; ``kptr`` as in :func:`edge_lookup`; ``locked`` the edges never flipped). Edge p-q of
+    the triangles (p, q, r) and (q, p, s) (exactly two, consistently oriented, r != s, both
+    ends ``active`` when given) may become r-s when r-s is not an edge yet, the pair's normals
+    are within ``cmax`` (a cosine) of each other, and ``orient`` says whether both new
+    triangles (r, s, q) and (s, r, p) are within it of the pair's mean unit normal. Returns
+    ``(pqrs (k, 4), faces (k, 2), orient, cos (4, k, 3))`` in edge order, ``cos`` the
+    :func:`corner_cosines` of the triangles T[f0], T[f1] (as stored) and the two new ones, for
+    numpy's ``arccos``. The bits of the numpy formulas of ``imprint._flip_round``."""
+    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
+    kptr, h0, h1, cnt = (np.ascontiguousarray(x, dtype=np.int64) for x in (kptr, h0, h1, cnt))
+    T = np.ascontiguousarray(T, dtype=np.int64).reshape(-1, 3)
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    locked = np.ascontiguousarray(locked, dtype=np.bool_)
+    active = np.zeros(0, np.bool_) if active is None else np.ascontiguousarray(active, dtype=np.bool_)
+    n = len(P)
+    if not (len(h0) == len(h1) == len(cnt) == len(locked) == len(E)) or len(kptr) != n + 1 \
+            or (len(active) and len(active) != n):
+        raise ValueError("skin_flips: arrays of mismatched lengths")
+    _check_index("E", E, n)
+    _check_index("T", T, n)
+    if kptr[0] != 0 or kptr[-1] != len(E) or (np.diff(kptr) < 0).any():
+        raise ValueError("kptr must be row pointers into E")
+    two = cnt == 2
+    _check_index("h0", h0, 3 * len(T))
+    _check_index("h1", h1[two], 3 * len(T))
+    return _skin_flips(E, kptr, h0, h1, cnt, locked, T, P, active, float(cmax))
+
+
 def _rows3(a):
     """``a`` as a C-contiguous float64 (k, 3) array, or None when it is not one (other dtype or
     shape: the caller falls back on numpy)."""
@@ -2457,6 +2574,8 @@ def warm_up() -> float:
                         np.array([0, 2, 4, 1, 5]), np.array([3, -1, -1, -1, -1]), np.zeros(5, bool), Fq,
                         np.zeros(2, np.int64), np.vstack([e, [1.0, -1.0, 0.0]]), 0.5, np.zeros(4, np.int64),
                         np.zeros(4, np.int64), e, 0.2, dg, dg)
-    edge_table(np.array([[0, 1, 2]]), 3)
+    _, h0, h1, cnt, E, _ = edge_table(Fq, 4)
+    skin_flips(E, np.array([0, 3, 5, 5, 5]), h0, h1, cnt, np.zeros(5, bool), Fq, np.vstack([e, [1.0, -1.0, 0.0]]),
+               0.5)
     edge_lookup(np.array([[0, 1], [0, 2], [1, 2]]), np.array([0, 2, 3, 3]), np.array([0, 2]), np.array([1, 1]))
     return time.perf_counter() - t0

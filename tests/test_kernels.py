@@ -906,6 +906,89 @@ def test_flip_candidates_match_the_numpy_formulas(seed):
         flip_candidates(E, T.kptr(), T.h0, T.h1, isf, F, fpatch, P[:-1], cosmax, kind, vtri, tri_n, cos_facing)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_skin_flips_match_the_numpy_formulas(seed):
+    """kernels.skin_flips gives the imprint's flip candidates, orientation test and angle
+    cosines of the numpy formulas it replaced (an edge table by a stable sort of the half-edge
+    keys, locked edges, active vertices, dihedral, existing new edge, the new pair against the
+    mean normal), on a wavy, jittered grid with a tetrahedron beside it (whose flips would
+    create existing edges), a folded corner and a node on top of its neighbour."""
+    from shellmesh_mdao.kernels import corner_cosines, edge_table, skin_flips
+    from shellmesh_mdao.mesh import cross_rows, norm_rows
+
+    rng = np.random.default_rng(seed)
+    nx = 14
+    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
+    g += rng.uniform(-0.3, 0.3, g.shape)
+    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
+    idx = np.arange(nx * nx).reshape(nx, nx)
+    P[idx[3, 3], 2] += 2.5                                 # a spike: steep dihedrals around it
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    flip = rng.random(len(q)) < 0.5
+    T = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
+                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    t0 = len(P)
+    P = np.vstack([P, [[20.0, 0, 0], [21.0, 0, 0], [20.0, 1.0, 0], [20.0, 0, 1.0]]])
+    T = np.vstack([T, t0 + np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])])
+    P[idx[5, 5]] = P[idx[5, 6]]
+    n = len(P)
+    # the numpy formulas
+    a, b = T, np.roll(T, -1, axis=1)
+    lo, hi = np.minimum(a, b).ravel(), np.maximum(a, b).ravel()
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    start = np.r_[True, ks[1:] != ks[:-1]]
+    uk = ks[start]
+    run = np.cumsum(start) - 1
+    cnt = np.diff(np.append(np.flatnonzero(start), len(ks)))
+    same = np.flatnonzero(ks[1:] == ks[:-1])
+    same = same[cnt[run[same]] == 2]
+    h0, h1 = order[same], order[same + 1]
+    ek = key[h0]
+    E0 = np.stack([lo, hi], 1)[order][start]
+    locked_pairs = E0[rng.random(len(E0)) < 0.1][:, ::-1]
+    free = ~np.isin(ek, locked_pairs.min(1) * n + locked_pairs.max(1))
+    h0, h1 = h0[free], h1[free]
+    f0, s0, f1, s1 = h0 // 3, h0 % 3, h1 // 3, h1 % 3
+    p, qq, r, s_ = T[f0, s0], T[f0, (s0 + 1) % 3], T[f0, (s0 + 2) % 3], T[f1, (s1 + 2) % 3]
+    active = rng.random(n) < 0.9
+    cmax = np.cos(np.radians(35.0 + 10.0 * seed))
+    ok = (T[f1, s1] == qq) & (T[f1, (s1 + 1) % 3] == p) & (r != s_) & active[p] & active[qq]
+    p, qq, r, s_, f0, f1 = p[ok], qq[ok], r[ok], s_[ok], f0[ok], f1[ok]
+    n0 = cross_rows(P[qq] - P[p], P[r] - P[p])
+    n1 = cross_rows(P[p] - P[qq], P[s_] - P[qq])
+    cosd = np.einsum("ij,ij->i", n0, n1) / np.maximum(norm_rows(n0, axis=1) * norm_rows(n1, axis=1), 1e-300)
+    new_key = np.minimum(r, s_) * n + np.maximum(r, s_)
+    pre = np.flatnonzero((cosd > cmax) & ~np.isin(new_key, uk))
+    p, qq, r, s_, f0, f1, n0, n1 = (x[pre] for x in (p, qq, r, s_, f0, f1, n0, n1))
+    t0_, t1_ = np.stack([r, s_, qq], 1), np.stack([s_, r, p], 1)
+    nn0 = cross_rows(P[t0_[:, 1]] - P[t0_[:, 0]], P[t0_[:, 2]] - P[t0_[:, 0]])
+    nn1 = cross_rows(P[t1_[:, 1]] - P[t1_[:, 0]], P[t1_[:, 2]] - P[t1_[:, 0]])
+    navg = n0 / np.maximum(norm_rows(n0, axis=1, keepdims=True), 1e-300) + \
+        n1 / np.maximum(norm_rows(n1, axis=1, keepdims=True), 1e-300)
+    un = navg / np.maximum(norm_rows(navg, axis=1, keepdims=True), 1e-300)
+    orient = (np.einsum("ij,ij->i", nn0, un) > cmax * norm_rows(nn0, axis=1)) & \
+        (np.einsum("ij,ij->i", nn1, un) > cmax * norm_rows(nn1, axis=1))
+    # the kernel
+    _, H0, H1, CNT, E, _ = edge_table(T, n)
+    kptr = np.concatenate([[0], np.cumsum(np.bincount(E[:, 0], minlength=n))])
+    from shellmesh_mdao.kernels import edge_lookup
+    locked = np.zeros(len(E), bool)
+    locked[edge_lookup(E, kptr, locked_pairs[:, 0], locked_pairs[:, 1])] = True
+    got_pqrs, got_ff, got_orient, got_cos = skin_flips(E, kptr, H0, H1, CNT, locked, T, P, cmax, active)
+    np.testing.assert_array_equal(got_pqrs, np.stack([p, qq, r, s_], 1))
+    np.testing.assert_array_equal(got_ff, np.stack([f0, f1], 1))
+    np.testing.assert_array_equal(got_orient, orient)
+    for j, tri in enumerate((T[f0], T[f1], t0_, t1_)):
+        _same(got_cos[j], corner_cosines(P[tri]))
+    # candidates and refusals of every kind occur
+    assert 10 < len(pre) < ok.sum() and orient.any() and (~orient).any()
+    assert np.isin(new_key, uk).any() and (cosd <= cmax).any()
+    with pytest.raises(ValueError):
+        skin_flips(E, kptr, H0, H1, CNT, locked[:-1], T, P, cmax)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_edge_table_matches_the_sorted_key_runs(seed):
     """kernels.edge_table gives remesh._Topo's arrays of the whole-array construction: a stable
