@@ -2017,16 +2017,49 @@ def _collapse_score(ai, bi, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _facing_score(ai, bi, fptr, vf, F, P, kind, vtri, tri_n, cos_facing, bvh_V, bvh_TB, bvh_id, bvh_box, bvh_child,
+                  bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout):
+    """The micro collapses' test of collapsing ``ai`` into ``bi``: no new face standing across
+    the input (:func:`_facing_one`) nor facing against the input triangle closest to its
+    centroid (the :class:`TriangleBVH` arrays, queries shifted by ``center`` as
+    ``SurfaceLocator.closest`` does); the edge's length, inf where a face fails."""
+    for p in range(fptr[ai], fptr[ai + 1]):
+        f = vf[p]
+        c0, c1, c2 = F[f, 0], F[f, 1], F[f, 2]
+        if c0 == bi or c1 == bi or c2 == bi:
+            continue
+        q0 = bi if c0 == ai else c0
+        q1 = bi if c1 == ai else c1
+        q2 = bi if c2 == ai else c2
+        n0, n1, n2 = _unit_normal(P[q0], P[q1], P[q2])
+        if not _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
+            return np.inf
+        for k in range(3):
+            q[0, k] = (P[q0, k] + P[q1, k] + P[q2, k]) / 3 - center[k]
+        _bvh_closest(q, 0, 1, bvh_V, bvh_TB, bvh_id, bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, qout, qid)
+        t = qid[0]
+        if not _dot3e(n0, n1, n2, tri_n[t, 0], tri_n[t, 1], tri_n[t, 2]) > 0:
+            return np.inf
+    d0, d1, d2 = P[ai, 0] - P[bi, 0], P[ai, 1] - P[bi, 1], P[ai, 2] - P[bi, 2]
+    return np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr, nbr, fptr, vf, F, P, h,
-                     max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n, cos_facing):
-    """:func:`_waves` with the collapse tests of :func:`_collapse_score` as the check: both
-    directions of each winner, the one with the smaller rmax taken (u into v on a tie)."""
+                     max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n, cos_facing, facing_only, bvh_V, bvh_TB,
+                     bvh_id, bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, center):
+    """:func:`_waves` with the collapse tests as the check: :func:`_collapse_score` in both
+    directions of each winner, the one with the smaller rmax taken (u into v on a tie); or,
+    ``facing_only``, :func:`_facing_score` u into v, else v into u."""
     ncand = alive.shape[0]
     rtop = rptr[:-1].copy()
     resolved = ~alive
     seen = np.full(ncand, -1, np.int64)
     out_a = np.empty(ncand, np.int64)
     out_b = np.empty(ncand, np.int64)
+    q = np.empty((1, 3))
+    qout = np.empty((1, 3))
+    qid = np.empty(1, np.int64)
     na = 0
     win = _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand)
     for wave in range(max_sub):
@@ -2037,12 +2070,20 @@ def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr
             c = win[i]
             s0 = np.inf
             s1 = np.inf
-            if dir_ok[c, 0]:
-                s0 = _collapse_score(u[c], v[c], nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn,
-                                     kind, vtri, tri_n, cos_facing)
-            if dir_ok[c, 1]:
-                s1 = _collapse_score(v[c], u[c], nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn,
-                                     kind, vtri, tri_n, cos_facing)
+            for dirn in range(2):
+                if not dir_ok[c, dirn] or (facing_only and s0 < np.inf):
+                    continue
+                a, b = (u[c], v[c]) if dirn == 0 else (v[c], u[c])
+                if facing_only:
+                    sc = _facing_score(a, b, fptr, vf, F, P, kind, vtri, tri_n, cos_facing, bvh_V, bvh_TB, bvh_id,
+                                       bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout)
+                else:
+                    sc = _collapse_score(a, b, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind,
+                                         vtri, tri_n, cos_facing)
+                if dirn == 0:
+                    s0 = sc
+                else:
+                    s1 = sc
             if s0 < np.inf or s1 < np.inf:
                 good[i] = True
                 if s1 < s0:
@@ -2056,8 +2097,11 @@ def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr
     return out_a[:na], out_b[:na]
 
 
-def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, max_len_ratio, fn_old, cos_turn, kind,
-                    vtri, tri_n, cos_facing, max_sub=16):
+_NO_SURFACE = None          # the BVH handed to the compiled selection when it has no surface to query
+
+
+def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, vtri, tri_n, cos_facing,
+                    max_len_ratio=np.inf, fn_old=None, cos_turn=-1.0, surface=None, max_sub=16):
     """The remesh's batch of edge collapses: :func:`greedy_independent_rings` over the
     candidate edges (``u``, ``v``; ``rank`` higher first; closed 1-rings of both ends as the
     lock regions), every winner checked in both allowed directions (``dir_ok`` (k, 2): u into
@@ -2074,7 +2118,15 @@ def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, max_len
       faces around ``a`` before), in degrees.
 
     A winner passing in a direction is collapsed, in the direction of the smaller rmax (u into
-    v on a tie). Returns ``(a, b)``: the vertices removed and where each goes, in the order
+    v on a tie).
+
+    With ``surface`` (a :class:`TriangleBVH` of the input and the ``center`` its triangles were
+    shifted by: ``(bvh, center)``) only the facing tests run, u into v first, else v into u: no
+    new face standing across the input, nor facing against the input triangle closest to its
+    centroid (the remesh's micro collapses; ``h``, ``max_len_ratio``, ``fn_old`` and
+    ``cos_turn`` are not used).
+
+    Returns ``(a, b)``: the vertices removed and where each goes, in the order
     the sub-rounds took them. ``nptr``/``nbr``: vertex neighbours; ``fptr``/``vf``: faces
     around each vertex; ``F`` (m, 3) faces on the points ``P``. The angles use the C
     library's atan2 (numpy's AVX-512 loop gives other last bits: see the module's note); a
@@ -2086,6 +2138,8 @@ def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, max_len
         return np.ascontiguousarray(x, dtype=np.float64)
     nptr, nbr, fptr, vf, u, v, kind, vtri = (i64(x) for x in (nptr, nbr, fptr, vf, u, v, kind, vtri))
     F = i64(F).reshape(-1, 3)
+    if fn_old is None:
+        fn_old = np.zeros((len(F), 3))
     P, fn_old, tri_n = (f64(x).reshape(-1, 3) for x in (P, fn_old, tri_n))
     h = f64(h)
     dir_ok = np.ascontiguousarray(dir_ok, dtype=np.bool_).reshape(-1, 2)
@@ -2111,8 +2165,20 @@ def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, max_len
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     alive = dir_ok[:, 0] | dir_ok[:, 1]
     cptr, cres, rptr, rcand = _build_rings(nptr, nbr, u, v, alive, rank, ncand, n)
+    if surface is None:
+        global _NO_SURFACE
+        if _NO_SURFACE is None:
+            _NO_SURFACE = TriangleBVH(np.eye(3), np.array([[0, 1, 2]]))
+        bvh, center = _NO_SURFACE, np.zeros(3)
+    else:
+        bvh, center = surface
+        center = f64(center).reshape(3)
+        if len(tri_n) != len(bvh._tri_id):
+            raise ValueError("collapse_select: tri_n needs one normal per triangle of the surface")
     return _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, int(max_sub), nptr, nbr, fptr, vf, F, P,
-                            h, float(max_len_ratio), fn_old, float(cos_turn), kind, vtri, tri_n, float(cos_facing))
+                            h, float(max_len_ratio), fn_old, float(cos_turn), kind, vtri, tri_n, float(cos_facing),
+                            surface is not None, bvh._V, bvh._TB, bvh._tri_id, bvh._box, bvh._child, bvh._start,
+                            bvh._cnt, bvh._slack, center)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -2564,10 +2630,12 @@ def warm_up() -> float:
     corner_sin_cos(Q[:, 0], Q[:, 1], Q[:, 2])           # the strided corners of a (k, 3, 3) array
     corner_cosines(e[None])
     facing_ok(np.array([[0, 1, 2]]), np.zeros(3, np.int64), np.zeros(3, np.int64), e, e[:1], 0.5)
-    collapse_select(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]),
-                    np.zeros(3, np.int64), np.array([[0, 1, 2]]), e, np.ones(3), np.array([0]), np.array([1]),
-                    np.array([1]), np.array([[True, True]]), max_len_ratio=2.0, fn_old=e[2:], cos_turn=0.5,
-                    kind=np.zeros(3, np.int64), vtri=np.zeros(3, np.int64), tri_n=e, cos_facing=0.2)
+    for surf in (None, (TriangleBVH(e, np.array([[0, 1, 2]])), np.zeros(3))):
+        collapse_select(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]),
+                        np.zeros(3, np.int64), np.array([[0, 1, 2]]), e, np.ones(3), np.array([0]), np.array([1]),
+                        np.array([1]), np.array([[True, True]]), max_len_ratio=2.0, fn_old=e[2:], cos_turn=0.5,
+                        kind=np.zeros(3, np.int64), vtri=np.zeros(3, np.int64), tri_n=e[:1], cos_facing=0.2,
+                        surface=surf)
     Fq = np.array([[0, 1, 2], [1, 0, 3]])
     for dg in (None, np.full(4, 3.0)):
         flip_candidates(np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3]]), np.array([0, 3, 5, 5, 5]),

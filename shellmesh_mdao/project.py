@@ -140,6 +140,12 @@ class SurfaceLocator:
             self._bvh = TriangleBVH(self._local, self.triangles)
         return self._bvh
 
+    def compiled_tree(self):
+        """``(bvh, center)``: the :class:`~shellmesh_mdao.kernels.TriangleBVH` that answers
+        :meth:`closest` and the point its triangles were shifted by (queries are shifted the
+        same way), for compiled loops that query it themselves."""
+        return self._tree(), self._center
+
     def _scene(self):
         if self._embree is None:
             from embreex import rtcore_scene

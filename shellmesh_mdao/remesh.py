@@ -1175,7 +1175,14 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
                     remove_first=None, check_geometry=True):
     """Collapse a maximal independent set of the candidate edges ``cand`` (higher ``prio``
     first). Cheap topological tests run on all candidates; the geometric tests only on
-    the candidates that win their neighbourhood in a selection sub-round."""
+    the candidates that win their neighbourhood in a selection sub-round: the sweeps' tests
+    (new edges against the local size, normal turn, facing, smallest angle), or with
+    ``check_geometry=False`` the facing tests only, both in the compiled selection
+    (:func:`~shellmesh_mdao.kernels.collapse_select`); with ``quality=True`` (the clean-up:
+    the smallest angle must rise, new edges within max_deviation) in numpy, called back each
+    sub-round."""
+    if quality and not check_geometry:
+        raise ValueError("_collapse_edges: the clean-up's quality tests include the geometric ones")
     E = T.E
     P = W.P
     n = W.n
@@ -1236,25 +1243,6 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         collapses the cheap tests allow), each pair on its own."""
         k = len(a)
         okd = okd.copy()
-        if not check_geometry:
-            if not okd.all():
-                return allowed_only(a, b, okd)
-            # only: no face around a may face against or stand across the input surface
-            ow, pos = _expand(fptr, a)
-            Fa = F[vf[pos]]
-            m = ~(Fa == b[ow][:, None]).any(1)
-            ow, Fa = ow[m], Fa[m]
-            Q = np.where((Fa == a[ow][:, None])[:, :, None], P[b[ow]][:, None, :], P[Fa])
-            nn = _unit(cross_rows(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]))
-            Fb = np.where(Fa == a[ow][:, None], b[ow][:, None], Fa)
-            badf = ~_facing_ok(W, ctx, Fb, nn)
-            if (~badf).any():
-                # the input normal where the new face's centroid projects
-                chk = np.flatnonzero(~badf)
-                _, ti, _ = ctx.loc.closest(Q[chk].mean(1))
-                badf[chk] = _dot(nn[chk], ctx.tri_n[ti]) <= 0
-            bad = np.bincount(ow, weights=badf, minlength=k) > 0
-            return np.where(okd & ~bad, _norm(P[a] - P[b]), np.inf)
         ow, pos = _expand(nptr, a)
         xx = nbr[pos]
         m = xx != b[ow]
@@ -1283,26 +1271,22 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         okd &= cmin > cos_turn
         Fb = np.where(isa, b[ow][:, None], Fa)
         okd &= ~(np.bincount(ow, weights=~_facing_ok(W, ctx, Fb, _unit(nn)), minlength=k) > 0)
-        # no new triangle much worse than the worst one it replaces (nor below 5 degrees
-        # unless that was already the case); quality=True: strictly better than before
+        # the smallest new angle strictly above the smallest old one
         amin_new = np.full(k, np.inf)
         np.minimum.at(amin_new, ow, _tri_min_angle(Q[:, 0], Q[:, 1], Q[:, 2]))
-        if quality:
-            okd &= amin_new > amin_old
-            if ctx.delta is not None and okd.any():
-                # clean-up collapses must keep the new edges within max_deviation
-                ow2, pos2 = _expand(nptr, a)
-                xx2 = nbr[pos2]
-                m2 = (xx2 != b[ow2]) & okd[ow2]
-                ow2, xx2 = ow2[m2], xx2[m2]
-                _, _, dd = ctx.loc.closest(0.5 * (P[xx2] + P[b[ow2]]))
-                _, _, d0 = ctx.loc.closest(0.5 * (P[xx2] + P[a[ow2]]))
-                # within max_deviation, or no worse than the edges they replace
-                lim = np.full(k, ctx.delta)
-                np.maximum.at(lim, ow2, d0)
-                okd &= ~(np.bincount(ow2, weights=dd > lim[ow2], minlength=k) > 0)
-        else:
-            okd &= amin_new >= np.minimum(5.0, 0.5 * amin_old)
+        okd &= amin_new > amin_old
+        if ctx.delta is not None and okd.any():
+            # clean-up collapses must keep the new edges within max_deviation
+            ow2, pos2 = _expand(nptr, a)
+            xx2 = nbr[pos2]
+            m2 = (xx2 != b[ow2]) & okd[ow2]
+            ow2, xx2 = ow2[m2], xx2[m2]
+            _, _, dd = ctx.loc.closest(0.5 * (P[xx2] + P[b[ow2]]))
+            _, _, d0 = ctx.loc.closest(0.5 * (P[xx2] + P[a[ow2]]))
+            # within max_deviation, or no worse than the edges they replace
+            lim = np.full(k, ctx.delta)
+            np.maximum.at(lim, ow2, d0)
+            okd &= ~(np.bincount(ow2, weights=dd > lim[ow2], minlength=k) > 0)
         return np.where(okd, rmax, np.inf)
 
     # ---- greedy independent set over lock regions (closed 1-rings of both ends),
@@ -1310,18 +1294,9 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
     acc_a, acc_b = [], []
 
     def check(win):
-        if check_geometry:
-            # both directions of every winner in one batch (u -> v first, then v -> u)
-            sc = geometric(np.concatenate([u[win], v[win]]), np.concatenate([v[win], u[win]]),
-                           np.concatenate([dir_ok[win, 0], dir_ok[win, 1]])).reshape(2, -1).T
-        else:
-            # both directions score the edge's length: v -> u only where u -> v fails
-            s0 = geometric(u[win], v[win], dir_ok[win, 0])
-            s1 = np.full(len(win), np.inf)
-            redo = np.flatnonzero(~np.isfinite(s0))
-            if len(redo):
-                s1[redo] = geometric(v[win[redo]], u[win[redo]], dir_ok[win[redo], 1])
-            sc = np.stack([s0, s1], 1)
+        # both directions of every winner in one batch (u -> v first, then v -> u)
+        sc = geometric(np.concatenate([u[win], v[win]]), np.concatenate([v[win], u[win]]),
+                       np.concatenate([dir_ok[win, 0], dir_ok[win, 1]])).reshape(2, -1).T
         good = np.isfinite(sc).any(1)
         if good.any():
             w, s = win[good], sc[good]
@@ -1330,11 +1305,12 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             acc_b.append(np.where(d == 0, v[w], u[w]))
         return good
 
-    if check_geometry and not quality:
-        # the sweeps' collapses: the selection and the tests in one compiled pass
-        a, b = collapse_select(nptr, nbr, fptr, vf, F, P, W.h, u, v, _rank(prio, cand), dir_ok,
-                               max_len_ratio=max_len_ratio, fn_old=fn_old, cos_turn=cos_turn, kind=W.kind,
-                               vtri=W.vtri, tri_n=ctx.tri_n, cos_facing=_COS_FACING, max_sub=16)
+    if not quality:
+        # the sweeps' and the micro collapses: the selection and the tests in one compiled pass
+        a, b = collapse_select(nptr, nbr, fptr, vf, F, P, W.h, u, v, _rank(prio, cand), dir_ok, kind=W.kind,
+                               vtri=W.vtri, tri_n=ctx.tri_n, cos_facing=_COS_FACING, max_len_ratio=max_len_ratio,
+                               fn_old=fn_old, cos_turn=cos_turn,
+                               surface=None if check_geometry else ctx.loc.compiled_tree(), max_sub=16)
         if not len(a):
             return 0
     else:

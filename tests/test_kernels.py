@@ -828,6 +828,86 @@ def test_collapse_select_matches_the_numpy_formulas(seed):
 
 
 @pytest.mark.parametrize("seed", range(4))
+def test_collapse_select_facing_only_matches_the_numpy_formulas(seed):
+    """kernels.collapse_select with a surface (the remesh's micro collapses) takes the
+    collapses the remesh took before: the call-back selection on the numpy formulas of the
+    facing tests (no new face standing across the input, nor facing against the input triangle
+    closest to its centroid, found by SurfaceLocator.closest), u into v first, else v into u.
+    On a wavy, jittered grid whose input is a tilted, partly flipped copy of itself."""
+    from shellmesh_mdao.kernels import collapse_select, facing_ok, greedy_independent_rings
+    from shellmesh_mdao.mesh import cross_rows
+    from shellmesh_mdao.project import SurfaceLocator
+    from shellmesh_mdao.remesh import _Topo, _expand, _norm, _tri_normals, _unit
+
+    rng = np.random.default_rng(seed)
+    nx = 14
+    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
+    g += rng.uniform(-0.35, 0.35, g.shape)
+    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
+    idx = np.arange(nx * nx).reshape(nx, nx)
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    flip = rng.random(len(q)) < 0.5
+    F = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
+                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    n = len(P)
+    T = _Topo(F, n)
+    nptr, nbr = T.vertex_neighbors()
+    fptr, vf = T.vertex_faces(F)
+    # the input: the grid raised and tilted, a third of its triangles turned over
+    Pin = P + np.array([0.1, -0.2, 0.3]) + 0.15 * P[:, [1, 0, 2]] * [1.0, -1.0, 0.0]
+    Fin = np.where((rng.random(len(F)) < 0.3)[:, None], F[:, [0, 2, 1]], F)
+    loc = SurfaceLocator(Pin, Fin)
+    tri_n = _unit(_tri_normals(Pin, Fin))
+    kind = rng.integers(0, 3, n)
+    vtri = rng.integers(-1, len(Fin), n)
+    cos_facing = np.cos(np.radians(80.0))
+    u, v = T.E[:, 0], T.E[:, 1]
+    dir_ok = rng.random((len(u), 2)) < 0.8
+    rank = rng.permutation(len(u)) + 1
+
+    def facing(a, b, okd):
+        k = len(a)
+        out = np.full(k, np.inf)
+        keep = np.flatnonzero(okd)
+        a, b = a[keep], b[keep]
+        ow, pos = _expand(fptr, a)
+        Fa = F[vf[pos]]
+        m = ~(Fa == b[ow][:, None]).any(1)
+        ow, Fa = ow[m], Fa[m]
+        Q = np.where((Fa == a[ow][:, None])[:, :, None], P[b[ow]][:, None, :], P[Fa])
+        nn = _unit(cross_rows(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]))
+        Fb = np.where(Fa == a[ow][:, None], b[ow][:, None], Fa)
+        badf = ~facing_ok(Fb, kind, vtri, tri_n, nn, cos_facing)
+        chk = np.flatnonzero(~badf)
+        if len(chk):
+            _, ti, _ = loc.closest(Q[chk].mean(1))
+            badf[chk] = np.einsum("ij,ij->i", nn[chk], tri_n[ti]) <= 0
+        bad = np.bincount(ow, weights=badf, minlength=len(keep)) > 0
+        out[keep] = np.where(~bad, _norm(P[a] - P[b]), np.inf)
+        return out
+
+    acc_a, acc_b, refusals = [], [], []
+
+    def check(win):
+        s0 = facing(u[win], v[win], dir_ok[win, 0])
+        s1 = np.full(len(win), np.inf)
+        redo = np.flatnonzero(~np.isfinite(s0))
+        s1[redo] = facing(v[win[redo]], u[win[redo]], dir_ok[win[redo], 1])
+        good = np.isfinite(s0) | np.isfinite(s1)
+        refusals.append(good)
+        acc_a.append(np.where(np.isfinite(s0), u[win], v[win])[good])
+        acc_b.append(np.where(np.isfinite(s0), v[win], u[win])[good])
+        return good
+    greedy_independent_rings(nptr, nbr, u, v, rank, alive=dir_ok.any(1), check=check, max_sub=16)
+    a, b = collapse_select(nptr, nbr, fptr, vf, F, P, np.ones(n), u, v, rank, dir_ok, kind=kind, vtri=vtri,
+                           tri_n=tri_n, cos_facing=cos_facing, surface=loc.compiled_tree(), max_sub=16)
+    np.testing.assert_array_equal(a, np.concatenate(acc_a))
+    np.testing.assert_array_equal(b, np.concatenate(acc_b))
+    # collapses taken in both directions, and winners refused by the tests
+    assert len(a) > 8 and (a > b).sum() > 3 and sum(int((~g).sum()) for g in refusals) > 5
+
+
+@pytest.mark.parametrize("seed", range(4))
 def test_flip_candidates_match_the_numpy_formulas(seed):
     """kernels.flip_candidates gives the flips, valence gains, new normals and angle arguments
     of the remesh's numpy formulas it replaced (c-d not an edge yet, one patch, the valence
