@@ -37,7 +37,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
            "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips",
+           "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips",
            "warm_up"]
 
 
@@ -1838,6 +1838,17 @@ def _dot_norm_rows(a):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _edge_lengths(P, E):
+    k = E.shape[0]
+    out = np.empty(k)
+    for i in range(k):
+        a, b = E[i, 0], E[i, 1]
+        d0, d1, d2 = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
+        out[i] = np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2))
+    return out
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _dot_unit_rows(a):
     k = a.shape[0]
@@ -2469,6 +2480,15 @@ def dot_norm_rows(a):
     return None if a3 is None else _dot_norm_rows(a3)
 
 
+def edge_lengths(P, E):
+    """``dot_norm_rows(P[E[:, 1]] - P[E[:, 0]])`` (einsum's norm of each edge vector, the same
+    bits) without gathering the two ends' rows: ``P`` (n, 3) float64, ``E`` (k, 2) indices."""
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
+    _check_index("E", E, len(P))
+    return _edge_lengths(P, E)
+
+
 def dot_unit_rows(a):
     """Rows of a (k, 3) float64 array divided by :func:`dot_norm_rows`, zero rows where that
     norm is not positive (``np.divide(a, n, out=zeros, where=n > 0)``); None otherwise."""
@@ -2624,6 +2644,7 @@ def warm_up() -> float:
     dot_rows(e, e)
     dot_norm_rows(e)
     dot_unit_rows(e)
+    edge_lengths(e, np.array([[0, 1]]))
     triangle_normals(e, np.array([[0, 1, 2]]))
     corner_sin_cos(e[:1], e[1:2], e[2:])
     Q = np.zeros((2, 3, 3))

@@ -38,8 +38,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lookup, edge_table, facing_ok,
-                      flip_candidates, greedy_independent, greedy_independent_rings, stable_order, triangle_normals)
+from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup, edge_table,
+                      facing_ok, flip_candidates, greedy_independent, greedy_independent_rings, stable_order,
+                      triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -280,7 +281,7 @@ class _Surface:
         npatch = int(patch.max()) + 1
         area = np.bincount(patch, weights=0.5 * self.tri_area2, minlength=npatch)
         E = self.topo.E
-        L = _norm(self.P[E[:, 1]] - self.P[E[:, 0]])
+        L = edge_lengths(self.P, E)
         per = np.bincount(patch[self.f0[isfeat]], weights=L[isfeat], minlength=npatch)
         in1 = isfeat & (self.f1 >= 0)
         per += np.bincount(patch[self.f1[in1]], weights=L[in1], minlength=npatch)
@@ -426,7 +427,7 @@ class _Surface:
             # path graph: interior vertices are nodes, every end (corner or cut) is a slot
             is_end = corner | cut
             node = np.where(is_end[FE], nv + 2 * np.arange(k)[:, None] + np.arange(2)[None, :], FE)
-            seglen = _norm(self.P[FE[:, 1]] - self.P[FE[:, 0]])
+            seglen = edge_lengths(self.P, FE)
             nn = nv + 2 * k + 1
             src = nn - 1
             # start slot of each chain: the end slot with the smallest (edge id, side)
@@ -580,7 +581,7 @@ class _Surface:
         #     sum(theta_e * len_e) / total area over the 3x3x3 voxels of size rho around each
         #     vertex; a chord of length l over curvature k deviates by l^2 k / 8.
         rho = h_min
-        L = _norm(P[E[sel, 1]] - P[E[sel, 0]])
+        L = edge_lengths(P, E[sel])
         mass = np.zeros(nv)
         for col in (0, 1):
             mass += np.bincount(E[sel, col], weights=0.5 * theta * L, minlength=nv)
@@ -759,7 +760,7 @@ def _grade(P, E, h, gradation):
     n = len(P)
     if not len(E) or gradation <= 0:
         return h
-    L = _norm(P[E[:, 1]] - P[E[:, 0]]) * gradation
+    L = edge_lengths(P, E) * gradation
     L = np.maximum(L, 1e-300)
     src = n
     rows = np.concatenate([E[:, 0], E[:, 1], np.full(n, src)])
@@ -950,7 +951,7 @@ def _micro_round(W, ctx, eps):
     input normals only: such a short move cannot fold the surface at the mesh scale."""
     T = W.topo()
     E = T.E
-    L = _norm(W.P[E[:, 1]] - W.P[E[:, 0]])
+    L = edge_lengths(W.P, E)
     he = 0.5 * (W.h[E[:, 0]] + W.h[E[:, 1]])
     cand = np.flatnonzero(L < eps * he)
     if not len(cand):
@@ -998,7 +999,7 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
     T = W.topo()
     E = T.E
     P = W.P
-    L = _norm(P[E[:, 1]] - P[E[:, 0]])
+    L = edge_lengths(P, E)
     he = 0.5 * (W.h[E[:, 0]] + W.h[E[:, 1]])
     cand = np.flatnonzero(L > _HI * he) if forced is None else np.unique(forced)
     if not len(cand):
@@ -1134,7 +1135,7 @@ def _collapse_round(W, ctx, max_normal_turn=45.0, quality=False):
     T = W.topo()
     E = T.E
     P = W.P
-    L = _norm(P[E[:, 1]] - P[E[:, 0]])
+    L = edge_lengths(P, E)
     he = 0.5 * (W.h[E[:, 0]] + W.h[E[:, 1]])
     prio = np.where(L < _LO * he, -(L / he), -np.inf)
     # regular vertices of valence 3 (a vertex inside a triangle of its neighbours) are
@@ -1622,7 +1623,7 @@ def _cleanup_round(W, ctx, bad_angle=20.0):
     e = np.unique(e[e >= 0])
     if not len(e):
         return 0
-    L = _norm(P[T.E[e, 1]] - P[T.E[e, 0]])
+    L = edge_lengths(P, T.E[e])
     return _collapse_edges(W, ctx, T, e, prio=-L, max_normal_turn=60.0, quality=True, max_len_ratio=2.0)
 
 
@@ -1641,7 +1642,7 @@ def _unstand_round(W, ctx):
     F = W.F
     e = np.unique(np.concatenate([T.lookup(F[bad, k], F[bad, (k + 1) % 3]) for k in range(3)]))
     e = e[e >= 0]
-    L = _norm(W.P[T.E[e, 1]] - W.P[T.E[e, 0]])
+    L = edge_lengths(W.P, T.E[e])
     return _collapse_edges(W, ctx, T, e, prio=-L, check_geometry=False)
 
 
@@ -1814,7 +1815,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         dm, dc, _, _ = _deviation(W, ctx)
         T = W.topo()
         E = T.E
-        L = _norm(W.P[E[:, 1]] - W.P[E[:, 0]])
+        L = edge_lengths(W.P, E)
         over = (dm > delta) & (L > _HI * h_min)
         if not over.any():
             break
@@ -1840,7 +1841,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
     for _ in range(12 if deviation_splits else 0):
         T = W.topo()
         E = T.E
-        L = _norm(W.P[E[:, 1]] - W.P[E[:, 0]])
+        L = edge_lengths(W.P, E)
         _, _, dm = surf.loc.closest(0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]]))
         over = np.flatnonzero((dm > delta) & (L > 2.0 * h_min))
         if not len(over):

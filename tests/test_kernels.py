@@ -605,9 +605,16 @@ def test_row_kernels_give_numpy_bits(k):
         w = np.hstack([a, b])
         _same(K.dot_rows(w[:, :3], w[:, 3:]), np.einsum("ij,ij->i", w[:, :3], w[:, 3:]))
         _same(K.cross_rows(a[::-1], b), np.cross(a[::-1], b))
+        # edge lengths: the ends gathered and subtracted, then einsum's norm (E a strided view too)
+        P = np.vstack([a, b])
+        E = np.column_stack([rng.integers(0, max(len(P), 1), (k, 2)), np.zeros(k, np.int64)])[:, :2] \
+            if len(P) else np.zeros((0, 2), np.int64)
+        _same(K.edge_lengths(P, E), np.sqrt(np.einsum("ij,ij->i", P[E[:, 1]] - P[E[:, 0]], P[E[:, 1]] - P[E[:, 0]])))
     assert K.dot_rows(a[:20].clip(-1, 1).astype(np.float32), b[:20]) is None
     assert K.cross_rows(a[:, :2], b[:, :2]) is None
     assert K.norm_rows(a[None]) is None
+    with pytest.raises(ValueError):
+        K.edge_lengths(a, [[0, len(a)]])
 
 
 @pytest.mark.parametrize("seed", range(3))
