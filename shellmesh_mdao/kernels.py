@@ -1210,16 +1210,22 @@ def edge_table(F, n):
     return _edge_table(F, int(n))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _edge_id(E, kptr, u, v):
+    """Row of the edge (u, v) (either order) in the sorted edge table ``E``, -1 if absent: a
+    scan of the rows of the lower end (``kptr``)."""
+    lo, hi = (u, v) if u <= v else (v, u)
+    for e in range(kptr[lo], kptr[lo + 1]):
+        if E[e, 1] == hi:
+            return e
+    return -1
+
+
 @njit(cache=True, nogil=True)
 def _edge_lookup(E, kptr, u, v):
     out = np.empty(u.shape[0], np.int64)
     for i in range(u.shape[0]):
-        lo, hi = (u[i], v[i]) if u[i] <= v[i] else (v[i], u[i])
-        out[i] = -1
-        for e in range(kptr[lo], kptr[lo + 1]):
-            if E[e, 1] == hi:
-                out[i] = e
-                break
+        out[i] = _edge_id(E, kptr, u[i], v[i])
     return out
 
 
@@ -2236,13 +2242,7 @@ def _flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, cosmax, kind, vtri, tri
         d = F[f1, (s1 + 2) % 3]
         if c == d or fpatch[f0] != fpatch[f1]:
             continue
-        lo, hi = (c, d) if c <= d else (d, c)
-        found = False
-        for x in range(kptr[lo], kptr[lo + 1]):
-            if E[x, 1] == hi:
-                found = True
-                break
-        if found:
+        if _edge_id(E, kptr, c, d) >= 0:
             continue
         gain = 0.0
         if valence:
@@ -2380,13 +2380,7 @@ def _skin_flips(E, kptr, h0, h1, cnt, locked, T, P, active, cmax):
             den = 1e-300
         if not _dot3e(a0, a1, a2, b0, b1, b2) / den > cmax:
             continue
-        lo, hi = (r, s) if r <= s else (s, r)
-        found = False
-        for x in range(kptr[lo], kptr[lo + 1]):
-            if E[x, 1] == hi:
-                found = True
-                break
-        if found:
+        if _edge_id(E, kptr, r, s) >= 0:
             continue
         # the new pair (r, s, q), (s, r, p) against the pair's mean unit normal
         c0, c1, c2 = _cross3(Ps[0] - Pr[0], Ps[1] - Pr[1], Ps[2] - Pr[2], Pq[0] - Pr[0], Pq[1] - Pr[1], Pq[2] - Pr[2])

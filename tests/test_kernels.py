@@ -766,6 +766,20 @@ def _old_collapse_geometric(a, b, okd, nptr, nbr, fptr, vf, F, P, h, max_len_rat
     return out
 
 
+def _wavy_grid(rng, jitter, nx=14):
+    """A wavy, jittered nx x nx grid of points, each cell cut into two triangles along a random
+    diagonal: (points, triangles, the grid's point ids (nx, nx))."""
+    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
+    g += rng.uniform(-jitter, jitter, g.shape)
+    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
+    idx = np.arange(nx * nx).reshape(nx, nx)
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    flip = rng.random(len(q)) < 0.5
+    F = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
+                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    return P, F, idx
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_collapse_select_matches_the_numpy_formulas(seed):
     """kernels.collapse_select takes the collapses (vertex removed, where it goes) that the
@@ -777,15 +791,7 @@ def test_collapse_select_matches_the_numpy_formulas(seed):
     from shellmesh_mdao.remesh import _Topo, _tri_normals, _unit
 
     rng = np.random.default_rng(seed)
-    nx = 14
-    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
-    g += rng.uniform(-0.3, 0.3, g.shape)
-    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
-    idx = np.arange(nx * nx).reshape(nx, nx)
-    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-    flip = rng.random(len(q)) < 0.5
-    F = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
-                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    P, F, idx = _wavy_grid(rng, 0.3)
     n = len(P)
     T = _Topo(F, n)
     nptr, nbr = T.vertex_neighbors()
@@ -847,15 +853,7 @@ def test_collapse_select_facing_only_matches_the_numpy_formulas(seed):
     from shellmesh_mdao.remesh import _Topo, _expand, _norm, _tri_normals, _unit
 
     rng = np.random.default_rng(seed)
-    nx = 14
-    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
-    g += rng.uniform(-0.35, 0.35, g.shape)
-    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
-    idx = np.arange(nx * nx).reshape(nx, nx)
-    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-    flip = rng.random(len(q)) < 0.5
-    F = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
-                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    P, F, idx = _wavy_grid(rng, 0.35)
     n = len(P)
     T = _Topo(F, n)
     nptr, nbr = T.vertex_neighbors()
@@ -925,15 +923,7 @@ def test_flip_candidates_match_the_numpy_formulas(seed):
     from shellmesh_mdao.remesh import _min_angle_of, _Topo, _unit
 
     rng = np.random.default_rng(seed)
-    nx = 14
-    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
-    g += rng.uniform(-0.3, 0.3, g.shape)
-    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
-    idx = np.arange(nx * nx).reshape(nx, nx)
-    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-    flip = rng.random(len(q)) < 0.5
-    F = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
-                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
+    P, F, idx = _wavy_grid(rng, 0.3)
     t0 = len(P)
     P = np.vstack([P, [[20.0, 0, 0], [21.0, 0, 0], [20.0, 1.0, 0], [20.0, 0, 1.0]]])
     F = np.vstack([F, t0 + np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])])
@@ -1004,16 +994,8 @@ def test_skin_flips_match_the_numpy_formulas(seed):
     from shellmesh_mdao.mesh import cross_rows, norm_rows
 
     rng = np.random.default_rng(seed)
-    nx = 14
-    g = np.stack(np.meshgrid(np.arange(nx), np.arange(nx), indexing="ij"), -1).reshape(-1, 2).astype(float)
-    g += rng.uniform(-0.3, 0.3, g.shape)
-    P = np.column_stack([g, 0.8 * np.sin(g[:, 0] * 0.9) * np.cos(g[:, 1] * 0.7)])
-    idx = np.arange(nx * nx).reshape(nx, nx)
+    P, T, idx = _wavy_grid(rng, 0.3)
     P[idx[3, 3], 2] += 2.5                                 # a spike: steep dihedrals around it
-    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-    flip = rng.random(len(q)) < 0.5
-    T = np.concatenate([np.where(flip[:, None], q[:, [0, 1, 2]], q[:, [0, 1, 3]]),
-                        np.where(flip[:, None], q[:, [0, 2, 3]], q[:, [1, 2, 3]])])
     t0 = len(P)
     P = np.vstack([P, [[20.0, 0, 0], [21.0, 0, 0], [20.0, 1.0, 0], [20.0, 0, 1.0]]])
     T = np.vstack([T, t0 + np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])])
