@@ -2011,16 +2011,7 @@ def _collapse_score(ai, bi, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old,
         q1 = bi if c1 == ai else c1
         q2 = bi if c2 == ai else c2
         A, B, C = P[q0], P[q1], P[q2]
-        u0, u1, u2 = B[0] - A[0], B[1] - A[1], B[2] - A[2]
-        v0, v1, v2 = C[0] - A[0], C[1] - A[1], C[2] - A[2]
-        n0 = u1 * v2 - u2 * v1
-        n1 = u2 * v0 - u0 * v2
-        n2 = u0 * v1 - u1 * v0
-        area = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
-        if area > 0:
-            n0, n1, n2 = n0 / area, n1 / area, n2 / area
-        else:
-            n0 = n1 = n2 = 0.0
+        n0, n1, n2, area = _unit_normal_area(A, B, C)
         cosn = _dot3e(n0, n1, n2, fn_old[f, 0], fn_old[f, 1], fn_old[f, 2])
         cmin = _min_nan(cmin, cosn if area > hb2 else -2.0)
         if not _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
@@ -2199,9 +2190,9 @@ def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, v
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _unit_normal(a, b, c):
+def _unit_normal_area(a, b, c):
     """Unit normal of triangle (a, b, c) (3-vectors): cross(b - a, c - a) over its einsum norm,
-    zero when that is not positive."""
+    zero when that is not positive; and that norm (twice the area)."""
     u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
     v0, v1, v2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
     n0 = u1 * v2 - u2 * v1
@@ -2209,8 +2200,15 @@ def _unit_normal(a, b, c):
     n2 = u0 * v1 - u1 * v0
     L = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
     if L > 0:
-        return n0 / L, n1 / L, n2 / L
-    return 0.0, 0.0, 0.0
+        return n0 / L, n1 / L, n2 / L, L
+    return 0.0, 0.0, 0.0, L
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _unit_normal(a, b, c):
+    """:func:`_unit_normal_area` without the area."""
+    n0, n1, n2, _ = _unit_normal_area(a, b, c)
+    return n0, n1, n2
 
 
 @njit(cache=True, nogil=True, inline="always")
