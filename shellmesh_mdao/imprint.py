@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from .errors import ImprintError
 from .kernels import (centroid_d2, chain_walk, corner_cosines, edge_lookup, edge_table, greedy_independent,
-                      segments_scan, segments_within, skin_flips)
+                      segments_scan, segments_within, skin_flips, star_moves)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
 
@@ -1415,17 +1415,11 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
         vv = cand[chain_of[cand] >= 0]
         if len(vv):
             new[vv] = _closest_on_arcs(new[vv], chain_of[vv], arcs)
-    # evaluate each vertex's star with only that vertex moved
-    Tm = T[tris]
-    which = Tm == rows[:, None]
-    pa = np.where(which[:, 0, None], new[rows], P[Tm[:, 0]])
-    pb = np.where(which[:, 1, None], new[rows], P[Tm[:, 1]])
-    pc = np.where(which[:, 2, None], new[rows], P[Tm[:, 2]])
-    Pn = np.stack([pa, pb, pc], 1)
-    ang_new = _angles3(Pn)
-    ang_old = _tri_angles_min(P, T)[tris]                   # Tm = T[tris]: the same triangles
-    nn = cross_rows(pb - pa, pc - pa)
-    flip = np.einsum("ij,ij->i", nn, nrm[tris]) <= 0
+    # evaluate each vertex's star with only that vertex moved (kernels.star_moves: the corner
+    # cosines with and without the move, and whether the moved triangle turns over)
+    cos_new, cos_old, flip = star_moves(rows, tris, T, P, new, nrm)
+    ang_new = _min_angle_from_cos(cos_new)
+    ang_old = _min_angle_from_cos(cos_old)
     worst_new = np.full(n, np.inf)
     worst_old = np.full(n, np.inf)
     np.minimum.at(worst_new, rows, np.where(flip, -1.0, ang_new))

@@ -37,7 +37,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
            "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips",
+           "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips", "star_moves",
            "warm_up"]
 
 
@@ -2337,7 +2337,13 @@ def _norm3(x, y, z):
 @njit(cache=True, nogil=True, inline="always")
 def _corner_cos_row(P, a, b, c, out, i):
     """corner_cosines of triangle (P[a], P[b], P[c]) into out[i]."""
-    X = (P[a], P[b], P[c])
+    _corner_cos3(P[a], P[b], P[c], out, i)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _corner_cos3(A, B, C, out, i):
+    """corner_cosines of the triangle with corners A, B, C (3-vectors) into out[i]."""
+    X = (A, B, C)
     for j in range(3):
         p = j
         q = 1 if j == 0 else 0
@@ -2431,6 +2437,42 @@ def skin_flips(E, kptr, h0, h1, cnt, locked, T, P, cmax, active=None):
     _check_index("h0", h0, 3 * len(T))
     _check_index("h1", h1[two], 3 * len(T))
     return _skin_flips(E, kptr, h0, h1, cnt, locked, T, P, active, float(cmax))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _star_moves(rows, tris, T, P, new, nrm):
+    k = rows.shape[0]
+    cos_new = np.empty((k, 3))
+    cos_old = np.empty((k, 3))
+    flip = np.empty(k, np.bool_)
+    for i in range(k):
+        r, t = rows[i], tris[i]
+        A = new[r] if T[t, 0] == r else P[T[t, 0]]
+        B = new[r] if T[t, 1] == r else P[T[t, 1]]
+        C = new[r] if T[t, 2] == r else P[T[t, 2]]
+        _corner_cos3(A, B, C, cos_new, i)
+        _corner_cos3(P[T[t, 0]], P[T[t, 1]], P[T[t, 2]], cos_old, i)
+        n0, n1, n2 = _cross3(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
+        flip[i] = _dot3e(n0, n1, n2, nrm[t, 0], nrm[t, 1], nrm[t, 2]) <= 0
+    return cos_new, cos_old, flip
+
+
+def star_moves(rows, tris, T, P, new, nrm):
+    """The imprint smoothing's test of moving vertex ``rows[i]`` from ``P`` to ``new`` alone, for
+    each of its triangles ``tris[i]`` (of ``T`` (m, 3)): the :func:`corner_cosines` of the
+    triangle with that vertex moved and before (for numpy's ``arccos``), and whether the moved
+    triangle's normal (cross_rows of its sides) turns against ``nrm[tris[i]]`` (einsum's dot at
+    most 0). The bits of the numpy formulas of ``imprint._smooth_round``."""
+    rows = np.ascontiguousarray(rows, dtype=np.int64).reshape(-1)
+    tris = np.ascontiguousarray(tris, dtype=np.int64).reshape(-1)
+    T = np.ascontiguousarray(T, dtype=np.int64).reshape(-1, 3)
+    P, new, nrm = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (P, new, nrm))
+    if len(rows) != len(tris) or len(new) != len(P) or len(nrm) != len(T):
+        raise ValueError("star_moves: rows/tris of one length, new one row per point, nrm one per triangle")
+    _check_index("rows", rows, len(P))
+    _check_index("tris", tris, len(T))
+    _check_index("T", T, len(P))
+    return _star_moves(rows, tris, T, P, new, nrm)
 
 
 def _rows3(a):
@@ -2658,5 +2700,6 @@ def warm_up() -> float:
     _, h0, h1, cnt, E, _ = edge_table(Fq, 4)
     skin_flips(E, np.array([0, 3, 5, 5, 5]), h0, h1, cnt, np.zeros(5, bool), Fq, np.vstack([e, [1.0, -1.0, 0.0]]),
                0.5)
+    star_moves(np.array([0]), np.array([0]), Fq, np.vstack([e, [1.0, -1.0, 0.0]]), np.ones((4, 3)), np.ones((2, 3)))
     edge_lookup(np.array([[0, 1], [0, 2], [1, 2]]), np.array([0, 2, 3, 3]), np.array([0, 2]), np.array([1, 1]))
     return time.perf_counter() - t0

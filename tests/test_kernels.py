@@ -1058,6 +1058,44 @@ def test_skin_flips_match_the_numpy_formulas(seed):
         skin_flips(E, kptr, H0, H1, CNT, locked[:-1], T, P, cmax)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_star_moves_match_the_numpy_formulas(seed):
+    """kernels.star_moves gives the imprint smoothing's corner cosines of every star triangle
+    with its vertex moved and before, and its turn-over test, as the numpy formulas it replaced
+    (gathers and np.where per corner, corner_cosines of the whole triangle set, np.einsum), on a
+    wavy grid whose vertices move by up to two cells (some triangles turn over), one onto its
+    neighbour."""
+    from shellmesh_mdao.kernels import corner_cosines, star_moves
+    from shellmesh_mdao.mesh import cross_rows, vertex_faces
+
+    rng = np.random.default_rng(seed)
+    P, T, idx = _wavy_grid(rng, 0.3)
+    n = len(P)
+    new = P + rng.uniform(-2.0, 2.0, P.shape) * (rng.random((n, 1)) < 0.5)
+    new[idx[4, 4]] = P[idx[4, 5]]
+    ptr, star = vertex_faces(T, n)
+    cand = np.flatnonzero(rng.random(n) < 0.6)
+    rows = np.repeat(cand, np.diff(ptr)[cand])
+    tris = np.concatenate([star[ptr[v]:ptr[v + 1]] for v in cand])
+    a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
+    nrm = cross_rows(b - a, c - a)
+    Tm = T[tris]
+    which = Tm == rows[:, None]
+    pa = np.where(which[:, 0, None], new[rows], P[Tm[:, 0]])
+    pb = np.where(which[:, 1, None], new[rows], P[Tm[:, 1]])
+    pc = np.where(which[:, 2, None], new[rows], P[Tm[:, 2]])
+    want_new = corner_cosines(np.stack([pa, pb, pc], 1))
+    want_old = corner_cosines(P[T])[tris]
+    want_flip = np.einsum("ij,ij->i", cross_rows(pb - pa, pc - pa), nrm[tris]) <= 0
+    cos_new, cos_old, flip = star_moves(rows, tris, T, P, new, nrm)
+    _same(cos_new, want_new)
+    _same(cos_old, want_old)
+    np.testing.assert_array_equal(flip, want_flip)
+    assert 0 < flip.sum() < len(flip)
+    with pytest.raises(ValueError):
+        star_moves(rows, tris, T, P, new[:-1], nrm)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_edge_table_matches_the_sorted_key_runs(seed):
     """kernels.edge_table gives remesh._Topo's arrays of the whole-array construction: a stable
