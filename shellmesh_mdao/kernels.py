@@ -37,7 +37,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
            "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips", "star_moves",
+           "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests",
            "warm_up"]
 
 
@@ -1943,6 +1943,16 @@ def _facing_ok(F, kind, vtri, tri_n, nrm, cos_facing):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _max_nan(cur, v):
+    """np.maximum(cur, v): a NaN on either side wins."""
+    if cur != cur:
+        return cur
+    if v != v or v > cur:
+        return v
+    return cur
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _min_nan(cur, v):
     """np.minimum(cur, v) for comparisons: a NaN on either side wins."""
     if cur != cur:
@@ -2475,6 +2485,54 @@ def star_moves(rows, tris, T, P, new, nrm):
     return _star_moves(rows, tris, T, P, new, nrm)
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _move_tests(cur, Fi, fn_old, area_old, moved, newtri, vtri, reg, tri_n, cosmax, cos_facing):
+    k = Fi.shape[0]
+    bad = np.empty(k, np.bool_)
+    sc = np.empty((4, k))
+    for i in range(k):
+        q0, q1, q2 = Fi[i, 0], Fi[i, 1], Fi[i, 2]
+        A, B, C = cur[q0], cur[q1], cur[q2]
+        n0, n1, n2, ar = _unit_normal_area(A, B, C)
+        b = _dot3e(n0, n1, n2, fn_old[i, 0], fn_old[i, 1], fn_old[i, 2]) <= cosmax or ar <= 1e-3 * area_old[i]
+        dmax = -2.0
+        anyreg = False
+        for v in (q0, q1, q2):
+            t = newtri[v] if moved[v] else vtri[v]
+            if reg[v] and t >= 0:
+                d = _dot3e(n0, n1, n2, tri_n[t, 0], tri_n[t, 1], tri_n[t, 2])
+                b = b or d <= 0
+                dmax = _max_nan(dmax, d)
+                anyreg = True
+        bad[i] = b or (anyreg and dmax <= cos_facing)
+        sc[0, i], sc[1, i] = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
+        sc[2, i], sc[3, i] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2], A[0] - B[0], A[1] - B[1], A[2] - B[2])
+    return bad, sc
+
+
+def move_tests(cur, Fi, fn_old, area_old, moved, newtri, vtri, reg, tri_n, cosmax, cos_facing):
+    """The remesh relaxation's tests of the faces ``Fi`` (k, 3) at the positions ``cur``, each
+    face on its own: ``bad`` where its unit normal turned from ``fn_old`` (k, 3) to a cosine of
+    ``cosmax`` or less, its area (twice, ``area_old`` the old) fell to 1e-3 of the old or less, or
+    it faces against the input at a regular corner (``reg``; input triangle ``newtri`` where
+    ``moved``, else ``vtri``, -1 none; ``tri_n`` their normals) or stands across it (no regular
+    corner's dot above ``cos_facing``); and the :func:`corner_sin_cos` arguments (4, k) of the
+    faces for numpy's ``arctan2``. The bits of the numpy formulas of ``remesh._accept_moves``."""
+    Fi = np.ascontiguousarray(Fi, dtype=np.int64).reshape(-1, 3)
+    cur, fn_old, tri_n = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (cur, fn_old, tri_n))
+    area_old = np.ascontiguousarray(area_old, dtype=np.float64).reshape(-1)
+    moved, reg = (np.ascontiguousarray(x, dtype=np.bool_).reshape(-1) for x in (moved, reg))
+    newtri, vtri = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (newtri, vtri))
+    n = len(cur)
+    if len(fn_old) != len(Fi) or len(area_old) != len(Fi) or not (len(moved) == len(reg) == len(newtri)
+                                                                    == len(vtri) == n):
+        raise ValueError("move_tests: fn_old/area_old one per face; moved, reg, newtri, vtri one per point")
+    _check_index("Fi", Fi, n)
+    if max(newtri.max(initial=-1), vtri.max(initial=-1)) >= len(tri_n):
+        raise ValueError(f"move_tests: input triangles must be below {len(tri_n)}")
+    return _move_tests(cur, Fi, fn_old, area_old, moved, newtri, vtri, reg, tri_n, float(cosmax), float(cos_facing))
+
+
 def _rows3(a):
     """``a`` as a C-contiguous float64 (k, 3) array, or None when it is not one (other dtype or
     shape: the caller falls back on numpy)."""
@@ -2700,6 +2758,8 @@ def warm_up() -> float:
     _, h0, h1, cnt, E, _ = edge_table(Fq, 4)
     skin_flips(E, np.array([0, 3, 5, 5, 5]), h0, h1, cnt, np.zeros(5, bool), Fq, np.vstack([e, [1.0, -1.0, 0.0]]),
                0.5)
+    move_tests(e, np.array([[0, 1, 2]]), e[2:], np.ones(1), np.array([True, False, False]), np.zeros(3, np.int64),
+               np.zeros(3, np.int64), np.ones(3, bool), e, 0.5, 0.2)
     star_moves(np.array([0]), np.array([0]), Fq, np.vstack([e, [1.0, -1.0, 0.0]]), np.ones((4, 3)), np.ones((2, 3)))
     edge_lookup(np.array([[0, 1], [0, 2], [1, 2]]), np.array([0, 2, 3, 3]), np.array([0, 2]), np.array([1, 1]))
     return time.perf_counter() - t0

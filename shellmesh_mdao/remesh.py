@@ -39,8 +39,8 @@ from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
 from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup, edge_table,
-                      facing_ok, flip_candidates, greedy_independent, greedy_independent_rings, stable_order,
-                      triangle_normals)
+                      facing_ok, flip_candidates, greedy_independent, greedy_independent_rings, move_tests,
+                      stable_order, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -1503,25 +1503,13 @@ def _accept_moves(W, ctx, newP, newtri, newS, moved, An_old, area_old, max_turn=
         if not len(fi):
             break
         Fi = F[fi]
-        An = _tri_normals(cur, Fi)
-        ar = _norm(An)
-        nu = np.divide(An, ar[:, None], out=np.zeros_like(An), where=ar[:, None] > 0)
-        bad = (_dot(nu, fn_old[fi]) <= cosmax) | (ar <= 1e-3 * area_old[fi])
+        # in one compiled pass (kernels.move_tests): no face turning by more than max_turn or
+        # losing its area, none facing against the input at its regular vertices or standing
+        # across it; the angles' arguments
+        bad, sc = move_tests(cur, Fi, fn_old[fi], area_old[fi], moved, newtri, W.vtri, reg, ctx.tri_n, cosmax,
+                             _COS_FACING)
         # no face may end up with a smaller angle than min(its old smallest angle, 10 deg)
-        amin_new = _tri_min_angle(cur[Fi[:, 0]], cur[Fi[:, 1]], cur[Fi[:, 2]])
-        bad |= amin_new < np.minimum(amin_old[fi], min_angle_floor)
-        # faces must face the way the input does at their regular vertices (not across it)
-        dmax = np.full(len(Fi), -2.0)
-        anyreg = np.zeros(len(Fi), bool)
-        for k in range(3):
-            vk = Fi[:, k]
-            tk = np.where(moved[vk], newtri[vk], W.vtri[vk])
-            rk = reg[vk] & (tk >= 0)
-            tn = ctx.tri_n[np.maximum(tk, 0)]
-            bad |= rk & (_dot(nu, tn) <= 0)
-            dmax = np.where(rk, np.maximum(dmax, _dot(nu, tn)), dmax)
-            anyreg |= rk
-        bad |= anyreg & (dmax <= _COS_FACING)
+        bad |= _min_angle_of(sc) < np.minimum(amin_old[fi], min_angle_floor)
         if not bad.any():
             break
         back = np.unique(Fi[bad].reshape(-1))

@@ -1096,6 +1096,57 @@ def test_star_moves_match_the_numpy_formulas(seed):
         star_moves(rows, tris, T, P, new[:-1], nrm)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_move_tests_match_the_numpy_formulas(seed):
+    """kernels.move_tests gives the remesh relaxation's face tests (normal turn, lost area,
+    facing against or standing across the input at regular corners) and angle arguments of the
+    numpy formulas it replaced, on a wavy grid whose vertices move by up to two cells, one onto
+    its neighbour, with NaN input normals and faces of the input turned over."""
+    from shellmesh_mdao.kernels import move_tests
+    from shellmesh_mdao.remesh import _min_angle_of, _norm, _tri_min_angle, _tri_normals, _unit
+
+    rng = np.random.default_rng(seed)
+    P, F, idx = _wavy_grid(rng, 0.3)
+    n, m = len(P), len(F)
+    moved = rng.random(n) < 0.5
+    cur = np.where(moved[:, None], P + rng.uniform(-2.0, 2.0, P.shape), P)
+    cur[idx[4, 4]] = P[idx[4, 5]]
+    moved[idx[4, 4]] = True
+    An_old = _tri_normals(P, F)
+    area_old = _norm(An_old)
+    fn_old = np.divide(An_old, area_old[:, None], out=np.zeros_like(An_old), where=area_old[:, None] > 0)
+    tri_n = _unit(An_old)[rng.permutation(m)] * rng.choice([-1.0, 1.0], (m, 1))
+    tri_n[3] = np.nan
+    newtri, vtri = rng.integers(-1, m, n), rng.integers(-1, m, n)
+    reg = rng.random(n) < 0.7
+    cosmax, cos_facing = np.cos(np.radians(60.0)), np.cos(np.radians(80.0))
+    fi = np.flatnonzero(moved[F].any(1))
+    Fi = F[fi]
+    # the numpy formulas
+    An = _tri_normals(cur, Fi)
+    ar = _norm(An)
+    nu = np.divide(An, ar[:, None], out=np.zeros_like(An), where=ar[:, None] > 0)
+    want = (np.einsum("ij,ij->i", nu, fn_old[fi]) <= cosmax) | (ar <= 1e-3 * area_old[fi])
+    dmax = np.full(len(Fi), -2.0)
+    anyreg = np.zeros(len(Fi), bool)
+    with np.errstate(invalid="ignore"):
+        for k in range(3):
+            vk = Fi[:, k]
+            tk = np.where(moved[vk], newtri[vk], vtri[vk])
+            rk = reg[vk] & (tk >= 0)
+            d = np.einsum("ij,ij->i", nu, tri_n[np.maximum(tk, 0)])
+            want |= rk & (d <= 0)
+            dmax = np.where(rk, np.maximum(dmax, d), dmax)
+            anyreg |= rk
+        want |= anyreg & (dmax <= cos_facing)
+    bad, sc = move_tests(cur, Fi, fn_old[fi], area_old[fi], moved, newtri, vtri, reg, tri_n, cosmax, cos_facing)
+    np.testing.assert_array_equal(bad, want)
+    _same(_min_angle_of(sc), _tri_min_angle(cur[Fi[:, 0]], cur[Fi[:, 1]], cur[Fi[:, 2]]))
+    assert 0 < bad.sum() < len(bad)
+    with pytest.raises(ValueError):
+        move_tests(cur, Fi, fn_old[fi], area_old[fi], moved, newtri, vtri, reg, tri_n[:5], cosmax, cos_facing)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_edge_table_matches_the_sorted_key_runs(seed):
     """kernels.edge_table gives remesh._Topo's arrays of the whole-array construction: a stable
