@@ -780,6 +780,14 @@ def _wavy_grid(rng, jitter, nx=14):
     return P, F, idx
 
 
+def _grid_topology(F, n):
+    """The remesh's edge table of triangles ``F`` on ``n`` points, its vertex neighbours and the
+    faces around each vertex (CSR pairs)."""
+    from shellmesh_mdao.remesh import _Topo
+    T = _Topo(F, n)
+    return T, T.vertex_neighbors(), T.vertex_faces(F)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_collapse_select_matches_the_numpy_formulas(seed):
     """kernels.collapse_select takes the collapses (vertex removed, where it goes) that the
@@ -788,14 +796,12 @@ def test_collapse_select_matches_the_numpy_formulas(seed):
     winner, the smaller longest-new-edge ratio first. On a wavy, jittered grid with a NaN size,
     a node on top of its neighbour and faces standing across the input."""
     from shellmesh_mdao.kernels import collapse_select, greedy_independent_rings
-    from shellmesh_mdao.remesh import _Topo, _tri_normals, _unit
+    from shellmesh_mdao.remesh import _tri_normals, _unit
 
     rng = np.random.default_rng(seed)
     P, F, idx = _wavy_grid(rng, 0.3)
     n = len(P)
-    T = _Topo(F, n)
-    nptr, nbr = T.vertex_neighbors()
-    fptr, vf = T.vertex_faces(F)
+    T, (nptr, nbr), (fptr, vf) = _grid_topology(F, n)
     h = rng.uniform(0.8, 1.6, n)
     h[3] = np.nan                                        # a NaN size fails its collapses
     fn_old = _unit(_tri_normals(P, F))
@@ -850,14 +856,12 @@ def test_collapse_select_facing_only_matches_the_numpy_formulas(seed):
     from shellmesh_mdao.kernels import collapse_select, facing_ok, greedy_independent_rings
     from shellmesh_mdao.mesh import cross_rows
     from shellmesh_mdao.project import SurfaceLocator
-    from shellmesh_mdao.remesh import _Topo, _expand, _norm, _tri_normals, _unit
+    from shellmesh_mdao.remesh import _expand, _norm, _tri_normals, _unit
 
     rng = np.random.default_rng(seed)
     P, F, idx = _wavy_grid(rng, 0.35)
     n = len(P)
-    T = _Topo(F, n)
-    nptr, nbr = T.vertex_neighbors()
-    fptr, vf = T.vertex_faces(F)
+    T, (nptr, nbr), (fptr, vf) = _grid_topology(F, n)
     # the input: the grid raised and tilted, a third of its triangles turned over
     Pin = P + np.array([0.1, -0.2, 0.3]) + 0.15 * P[:, [1, 0, 2]] * [1.0, -1.0, 0.0]
     Fin = np.where((rng.random(len(F)) < 0.3)[:, None], F[:, [0, 2, 1]], F)
