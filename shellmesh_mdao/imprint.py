@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ImprintError
-from .kernels import (centroid_d2, chain_walk, corner_cosines, edge_lookup, edge_table, greedy_independent,
+from .kernels import (centroid_d2, chain_walk, corner_cosines, edge_lookup, edge_rows, edge_table, greedy_independent,
                       segments_scan, segments_within, skin_flips, star_moves)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
 from .section import Plane, SectionArc, plane_section, section_arc
@@ -1298,14 +1298,6 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
                      mesh.feature_edge_ids)
 
 
-def _in_sorted(x, sorted_keys):
-    """``np.isin(x, sorted_keys)`` for a sorted key array (a binary search, no sort)."""
-    if not len(sorted_keys):
-        return np.zeros(len(x), bool)
-    i = np.minimum(np.searchsorted(sorted_keys, x), len(sorted_keys) - 1)
-    return sorted_keys[i] == x
-
-
 def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0, active=None):
     """One round of angle-improving edge flips on an independent set of edges.
 
@@ -1321,7 +1313,7 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0, active=None
     # a bend, three close vertices of one chain around a rounded leading edge, would lie in the
     # member plane, across the skin); the angles' cosines of the old and new triangles
     _, h0, h1, cnt, E, _ = edge_table(T, n)
-    kptr = np.concatenate([[0], np.cumsum(np.bincount(E[:, 0], minlength=n))])
+    kptr = edge_rows(E, n)
     locked = np.zeros(len(E), bool)
     if len(locked_edges):
         lk = np.asarray(locked_edges).reshape(-1, 2)

@@ -36,9 +36,9 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
-           "edge_table", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows",
-           "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok", "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests",
-           "warm_up"]
+           "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
+           "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
+           "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -1229,10 +1229,17 @@ def _edge_lookup(E, kptr, u, v):
     return out
 
 
+def edge_rows(E, n):
+    """Row pointers ``kptr`` (n + 1,) of the edge table ``E`` (e, 2) of :func:`edge_table` (rows
+    ``(lo, hi)`` sorted): the rows whose lower end is ``lo`` are ``E[kptr[lo]:kptr[lo + 1]]``."""
+    E = np.asarray(E).reshape(-1, 2)
+    return np.concatenate([[0], np.cumsum(np.bincount(E[:, 0], minlength=int(n)))])
+
+
 def edge_lookup(E, kptr, u, v):
     """Edge id of each node pair ``(u[i], v[i])`` (either order), -1 where absent, in the edge
     table ``E`` (e, 2) of :func:`edge_table` (rows ``(lo, hi)`` sorted): ``kptr`` (n + 1,) the
-    rows of each ``lo`` (``E[kptr[lo]:kptr[lo + 1]]``); a scan of those few rows."""
+    rows of each ``lo`` (:func:`edge_rows`); a scan of those few rows."""
     E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
     kptr = np.ascontiguousarray(kptr, dtype=np.int64)
     u = np.ascontiguousarray(u, dtype=np.int64).reshape(-1)
@@ -1821,8 +1828,7 @@ def _norm_rows(a):
     k = a.shape[0]
     out = np.empty(k)
     for i in range(k):
-        x, y, z = a[i, 0], a[i, 1], a[i, 2]
-        out[i] = np.sqrt(x * x + y * y + z * z)
+        out[i] = _norm3(a[i, 0], a[i, 1], a[i, 2])
     return out
 
 
@@ -1872,20 +1878,15 @@ def _tri_normals(P, F):
     out = np.empty((k, 3))
     for i in range(k):
         a, b, c = F[i, 0], F[i, 1], F[i, 2]
-        u0, u1, u2 = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
-        v0, v1, v2 = P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2]
-        out[i, 0] = u1 * v2 - u2 * v1
-        out[i, 1] = u2 * v0 - u0 * v2
-        out[i, 2] = u0 * v1 - u1 * v0
+        out[i, 0], out[i, 1], out[i, 2] = _cross3(P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2],
+                                                  P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2])
     return out
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _sin_cos(u0, u1, u2, v0, v1, v2):
     """(|u x v|, u . v) with numpy's sums (einsum order for both)."""
-    c0 = u1 * v2 - u2 * v1
-    c1 = u2 * v0 - u0 * v2
-    c2 = u0 * v1 - u1 * v0
+    c0, c1, c2 = _cross3(u0, u1, u2, v0, v1, v2)
     return np.sqrt(_dot3e(c0, c1, c2, c0, c1, c2)), _dot3e(u0, u1, u2, v0, v1, v2)
 
 
@@ -1906,17 +1907,7 @@ def _corner_cosines(X):
     k = X.shape[0]
     out = np.empty((k, 3))
     for i in range(k):
-        for j in range(3):
-            # corner 0: (b - a, c - a); corner 1: (a - b, c - b); corner 2: (a - c, b - c)
-            p = j
-            q = 1 if j == 0 else 0
-            r = 1 if j == 2 else 2
-            u0, u1, u2 = X[i, q, 0] - X[i, p, 0], X[i, q, 1] - X[i, p, 1], X[i, q, 2] - X[i, p, 2]
-            v0, v1, v2 = X[i, r, 0] - X[i, p, 0], X[i, r, 1] - X[i, p, 1], X[i, r, 2] - X[i, p, 2]
-            den = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2) * np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-            if den < 1e-300:                      # np.maximum(den, 1e-300): a NaN stays
-                den = 1e-300
-            out[i, j] = _dot3e(u0, u1, u2, v0, v1, v2) / den
+        _corner_cos3(X[i, 0], X[i, 1], X[i, 2], out, i)
     return out
 
 
@@ -2203,11 +2194,7 @@ def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, v
 def _unit_normal_area(a, b, c):
     """Unit normal of triangle (a, b, c) (3-vectors): cross(b - a, c - a) over its einsum norm,
     zero when that is not positive; and that norm (twice the area)."""
-    u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    v0, v1, v2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
-    n0 = u1 * v2 - u2 * v1
-    n1 = u2 * v0 - u0 * v2
-    n2 = u0 * v1 - u1 * v0
+    n0, n1, n2 = _cross3(b[0] - a[0], b[1] - a[1], b[2] - a[2], c[0] - a[0], c[1] - a[1], c[2] - a[2])
     L = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
     if L > 0:
         return n0 / L, n1 / L, n2 / L, L
@@ -2355,13 +2342,14 @@ def _corner_cos3(A, B, C, out, i):
     """corner_cosines of the triangle with corners A, B, C (3-vectors) into out[i]."""
     X = (A, B, C)
     for j in range(3):
+        # corner 0: (b - a, c - a); corner 1: (a - b, c - b); corner 2: (a - c, b - c)
         p = j
         q = 1 if j == 0 else 0
         r = 1 if j == 2 else 2
         u0, u1, u2 = X[q][0] - X[p][0], X[q][1] - X[p][1], X[q][2] - X[p][2]
         v0, v1, v2 = X[r][0] - X[p][0], X[r][1] - X[p][1], X[r][2] - X[p][2]
-        den = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2) * np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        if den < 1e-300:
+        den = _norm3(u0, u1, u2) * _norm3(v0, v1, v2)
+        if den < 1e-300:                          # np.maximum(den, 1e-300): a NaN stays
             den = 1e-300
         out[i, j] = _dot3e(u0, u1, u2, v0, v1, v2) / den
 

@@ -38,8 +38,8 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup, edge_table,
-                      facing_ok, flip_candidates, greedy_independent, greedy_independent_rings, move_tests,
+from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup, edge_rows,
+                      edge_table, facing_ok, flip_candidates, greedy_independent, greedy_independent_rings, move_tests,
                       stable_order, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
@@ -157,7 +157,7 @@ class _Topo:
         """Row pointers of each lower end's edges in ``E`` (E's rows are sorted by key
         lo * n + hi, so by lo: each lo's rows are one run)."""
         if self._kptr is None:
-            self._kptr = np.concatenate([[0], np.cumsum(np.bincount(self.E[:, 0], minlength=self.n))])
+            self._kptr = edge_rows(self.E, self.n)
         return self._kptr
 
     def lookup(self, u, v):
@@ -1227,7 +1227,7 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
     alive = dir_ok[:, 0] | dir_ok[:, 1]
     if not alive.any():
         return 0
-    fn_old = _unit(_tri_normals(P, F))
+    fn_old = _unit(_tri_normals(P, F)) if check_geometry else None     # the facing tests need no normal turn
     cos_turn = np.cos(np.radians(max_normal_turn))
 
     def allowed_only(a, b, okd):

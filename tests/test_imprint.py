@@ -464,26 +464,6 @@ def test_closest_on_arcs_matches_one_arc_at_a_time():
         assert (d <= dv + 1e-12).all()
 
 
-def test_flip_round_edge_tables_match_the_unique_and_isin_formulas():
-    """The imprint's flip round reads its edge table from the runs of the sorted keys and
-    tests membership by binary search: the same edges as np.unique / np.isin."""
-    from shellmesh_mdao.imprint import _in_sorted
-
-    rng = np.random.default_rng(0)
-    ks = np.sort(rng.integers(0, 400, 1500))
-    same = np.flatnonzero(ks[1:] == ks[:-1])
-    cnt_old = np.bincount(np.searchsorted(np.unique(ks), ks))
-    two_old = np.isin(ks[same], np.unique(ks)[cnt_old == 2])
-    start = np.r_[True, ks[1:] != ks[:-1]]
-    cnt = np.diff(np.append(np.flatnonzero(start), len(ks)))
-    two = cnt[(np.cumsum(start) - 1)[same]] == 2
-    assert np.array_equal(two, two_old) and two.any() and not two.all()
-    x = rng.integers(-5, 420, 3000)
-    assert np.array_equal(_in_sorted(x, ks[start]), np.isin(x, ks))
-    assert np.array_equal(_in_sorted(x, np.sort(x[:7])), np.isin(x, x[:7]))
-    assert not _in_sorted(x, np.zeros(0, np.int64)).any()
-
-
 @pytest.mark.parametrize("seed", range(4))
 def test_segment_scan_and_kd_tree_give_the_same_closest_points(seed, monkeypatch):
     """Closest points on polylines and arcs: the compiled scan of every segment and the KD-tree
