@@ -2106,9 +2106,6 @@ def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr
     return out_a[:na], out_b[:na]
 
 
-_NO_SURFACE = None          # the BVH handed to the compiled selection when it has no surface to query
-
-
 def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, vtri, tri_n, cos_facing,
                     max_len_ratio=np.inf, fn_old=None, cos_turn=-1.0, surface=None, max_sub=16):
     """The remesh's batch of edge collapses: :func:`greedy_independent_rings` over the
@@ -2175,19 +2172,19 @@ def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, v
     alive = dir_ok[:, 0] | dir_ok[:, 1]
     cptr, cres, rptr, rcand = _build_rings(nptr, nbr, u, v, alive, rank, ncand, n)
     if surface is None:
-        global _NO_SURFACE
-        if _NO_SURFACE is None:
-            _NO_SURFACE = TriangleBVH(np.eye(3), np.array([[0, 1, 2]]))
-        bvh, center = _NO_SURFACE, np.zeros(3)
+        # no tree to query (the sweeps' tests): empty arrays of the tree's types
+        tree = (np.empty((0, 9)), np.empty((0, 6)), np.empty(0, np.int64), np.empty((0, 6)), np.empty(0, np.int64),
+                np.empty(0, np.int64), np.empty(0, np.int64), 0.0)
+        center = np.zeros(3)
     else:
         bvh, center = surface
         center = f64(center).reshape(3)
         if len(tri_n) != len(bvh._tri_id):
             raise ValueError("collapse_select: tri_n needs one normal per triangle of the surface")
+        tree = (bvh._V, bvh._TB, bvh._tri_id, bvh._box, bvh._child, bvh._start, bvh._cnt, bvh._slack)
     return _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, int(max_sub), nptr, nbr, fptr, vf, F, P,
                             h, float(max_len_ratio), fn_old, float(cos_turn), kind, vtri, tri_n, float(cos_facing),
-                            surface is not None, bvh._V, bvh._TB, bvh._tri_id, bvh._box, bvh._child, bvh._start,
-                            bvh._cnt, bvh._slack, center)
+                            surface is not None, *tree, center)
 
 
 @njit(cache=True, nogil=True, inline="always")
