@@ -20,7 +20,7 @@ install-system:
 	    || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || ! command -v mpirun >/dev/null 2>&1; then \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(SYSTEM_PACKAGES) >/dev/null; fi
 
-# the last line compiles the numba kernels once (about 35 s; cached next to the package), so that the first
+# the last line compiles the numba kernels once (about 45 s; cached next to the package), so that the first
 # run does not pay for it
 install: install-system
 	$(PYTHON) -m pip install --quiet -e .

@@ -2682,7 +2682,7 @@ def closest_on_curves(q, cid, start, stop, a, ab, L):
 
 def warm_up() -> float:
     """Compile every kernel (or load it from numba's cache) on a tiny input; returns the
-    seconds it took (about 35 s on a new install, 0.3 s once cached). Run by ``make install``
+    seconds it took (about 45 s on a new install, 0.3 s once cached). Run by ``make install``
     and by the benchmark before its clock starts."""
     import time
     t0 = time.perf_counter()
