@@ -66,7 +66,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, ProjectionError
 from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
                       face_quality, min_corner_sj, ortho_gradient, ortho_jacobian, pair_difference)
-from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, norm_rows, vertex_faces
+from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows, vertex_faces
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
 
@@ -709,13 +709,13 @@ class SmoothResult:
     quality_after: dict = field(default_factory=dict)
 
 
-def _pairs(mesh: ShellMesh, diagonal_weight: float):
-    """Energy pairs: unique edges (weight 1) and quad diagonals (weight ``diagonal_weight``),
-    with the rest-length factor (1 for edges, sqrt 2 for diagonals)."""
-    E = mesh.edges()
+def _pairs(E, faces, is_tri, diagonal_weight: float):
+    """Energy pairs: the unique edges ``E`` of ``faces`` (weight 1) and the quad diagonals
+    (weight ``diagonal_weight``), with the rest-length factor (1 for edges, sqrt 2 for
+    diagonals)."""
     pairs, w, f = [E], [np.ones(len(E))], [np.ones(len(E))]
-    if diagonal_weight > 0 and mesh.n_quads:
-        q = mesh.faces[mesh.is_quad]
+    if diagonal_weight > 0 and not is_tri.all():
+        q = faces[~is_tri]
         D = np.vstack([q[:, [0, 2]], q[:, [1, 3]]])
         pairs.append(D)
         w.append(np.full(len(D), float(diagonal_weight)))
@@ -1107,7 +1107,9 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         tighter than itself and cannot be flattened by sliding its corners, and pulling at it
         or beside it drags nodes across the crease. Default 180 (none left out).
     vertices : ids of the vertices that may move (default None: all); the others hold
-        still, as if FIXED, and only constrain the step (fold guard, energy).
+        still, as if FIXED, and only constrain the step (fold guard, energy). Only the faces at
+        them take part (the same result as over the whole mesh with the others FIXED, bit for
+        bit).
     trust : per-step move limit as a fraction of the distance to the nearest other vertex.
     reg : regulariser ``rho_i = reg * (mean diagonal of vertex i's energy block)
         * (1 + curvature_weight * kappa_i)`` with ``kappa_i = 1 - min_f n_i . n_f`` over the incident faces (0 on a
@@ -1164,12 +1166,24 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     P = mesh.points.copy()
     faces, is_tri = mesh.faces, mesh.is_tri
     before = mesh_figures(mesh, supports, target_edge) if figures in ("both", "before") else {}
-    pairs, pw0, pf = _pairs(mesh, diagonal_weight)
-    i, j = pairs[:, 0], pairs[:, 1]
     scale = float(np.median(mesh.edge_lengths())) if mesh.n_faces else 1.0
     dof = supports.dof()
     movable = np.flatnonzero(dof > 0)
     vptr, vface = vertex_faces(faces, n)
+    E = mesh.edges()
+    if vertices is not None:
+        # only the faces at a movable vertex take part: the other faces' terms do not reach the
+        # movable vertices' equations, and each of those equations sums the same terms in the
+        # same order (pairs, quads and faces keep their order). A draped face (warp_spread) needs
+        # two corners with a support normal, i.e. movable ones, so it is among these faces too.
+        # The same bits as over the whole mesh, for the cost of the region
+        act = _faces_of(vptr, vface, movable, len(faces))
+        faces, is_tri = faces[act], is_tri[act]
+        vptr, vface = vertex_faces(faces, n)
+        E = edge_topology(faces).edges
+    pairs, pw0, pf = _pairs(E, faces, is_tri, diagonal_weight)
+    i, j = pairs[:, 0], pairs[:, 1]
+    has_quads = not is_tri.all()
     method = solver
     if solver == "auto":
         method = "lu" if int(dof.sum()) <= AUTO_LU_MAX_UNKNOWNS else "cg"
@@ -1197,11 +1211,11 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
             diag_v = np.asarray(K.diagonal(), dtype=np.float64)
             col_start = np.searchsorted(owner, np.arange(n))
             ortho = None
-            if ortho_weight > 0 and mesh.n_quads:
+            if ortho_weight > 0 and has_quads:
                 ortho = _Ortho(P, faces, ~is_tri, scale)
                 diag_v = diag_v + ortho_weight * ortho.block_trace(n)
             warpt = None
-            if warp_weight > 0 and mesh.n_quads and method != "kkt":
+            if warp_weight > 0 and has_quads and method != "kkt":
                 warpt = _Warp(P, faces, ~is_tri, scale, lambda v: _support_normals(supports, P, v), warp_from,
                               warp_spread)
                 if len(warpt):
@@ -1216,7 +1230,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                                                            np.tile(np.eye(3), (n, 1)), 3 * n)
             else:
                 if hess is None:           # the pattern: pairs, and whole quads where a quad term is used
-                    quad_terms = mesh.n_quads and (ortho_weight > 0 or warp_weight > 0)
+                    quad_terms = has_quads and (ortho_weight > 0 or warp_weight > 0)
                     hess = ReducedHessian(i, j, faces[~is_tri] if quad_terms else np.zeros((0, 4), np.int64), dof,
                                           col_start)
                 H = hess.matrix(hess.values(tv, pw, rho_v[owner], ortho=None if ortho is None else ortho.terms(),

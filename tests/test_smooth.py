@@ -521,14 +521,15 @@ def test_warp_term_gradient_and_hessian_are_those_of_its_energy():
     assert np.array_equal(H, H.T)
 
 
-def _roof(kink_deg=24.0, n=8):
+def _roof(kink_deg=24.0, n=8, twist=0.0):
     """A quad grid draped over a roof (two planes meeting at a ridge along the diagonal
     x = y, each tilted by kink/2): the quads on the ridge are folded along it. Input skin: the
-    roof as a fine triangulation; the grid's boundary nodes are fixed."""
+    roof as a fine triangulation; the grid's boundary nodes are fixed. ``twist`` adds
+    ``twist (x - 1/2) (y - 1/2)`` to the height: a saddle, on which every quad is warped."""
     t = np.tan(np.radians(kink_deg / 2))
 
     def z(x, y):
-        return -t * np.abs(x - y) / np.sqrt(2)
+        return -t * np.abs(x - y) / np.sqrt(2) + twist * (x - 0.5) * (y - 0.5)
 
     P, F, idx = grid(n, n)
     P[:, 2] = z(P[:, 0], P[:, 1])
@@ -613,8 +614,9 @@ def test_warp_spread_leaves_out_quads_draped_over_a_tight_crease():
 
 def test_smooth_vertices_moves_only_those_and_keeps_them_on_the_surface():
     """smooth(vertices=ids): only those vertices move (the others hold still bit for bit, as
-    with Supports.held(ids), which makes every other vertex FIXED); the moved ones stay on the
-    input surface and no element falls below min(its own, 0.3)."""
+    with Supports.held(ids), which makes every other vertex FIXED, and the result is that
+    smoothing's bit for bit although only the faces around the ids take part); the moved ones
+    stay on the input surface and no element falls below min(its own, 0.3)."""
     mesh, sup = _roof()
     free = np.flatnonzero(sup.kind != FIXED)
     some = free[: len(free) // 2]
@@ -625,6 +627,22 @@ def test_smooth_vertices_moves_only_those_and_keeps_them_on_the_surface():
     part, _ = smooth(mesh, sup, iterations=10, warp_weight=300.0, warp_from=2.0, vertices=some)
     same, _ = smooth(mesh, held, iterations=10, warp_weight=300.0, warp_from=2.0)
     assert part.points.tobytes() == same.points.tobytes()
+    # smooth(vertices=) works on the faces at them only: with the pipeline's energy, diagonals,
+    # the orthogonality term and a small region, still the whole-mesh smoothing with the others
+    # held, bit for bit
+    # and with the planarity term on a twisted roof (every quad warped), where warp_spread
+    # leaves out the quads beside draped ones
+    twisted, tsup = _roof(twist=0.8)
+    off = np.abs(mesh.points[free, 0] - mesh.points[free, 1])
+    few = free[np.abs(off - 3 / 8) < 1e-9][:6]
+    for m, s, opts in ((mesh, sup, {"energy": "squared", "target_edge": 0.1, "ortho_weight": 3.0,
+                                    "diagonal_weight": 0.5}),
+                       (twisted, tsup, {"energy": "squared", "target_edge": 0.1, "warp_weight": 300.0,
+                                        "warp_from": 0.5, "warp_spread": 20.0})):
+        region, _ = smooth(m, s, iterations=6, vertices=few, **opts)
+        whole, _ = smooth(m, s.held(few), iterations=6, **opts)
+        assert region.points.tobytes() == whole.points.tobytes()
+        assert np.any(region.points[few] != m.points[few])
     moved = np.flatnonzero(np.any(part.points != mesh.points, axis=1))
     assert len(moved) > len(some) // 2 and np.isin(moved, some).all()
     assert sup.distance(part.points).max() <= 1e-9 * mesh.diagonal
