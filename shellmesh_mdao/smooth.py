@@ -81,6 +81,13 @@ _NDOF = np.array([0, 1, 2, 2], dtype=np.int64)
 #: Jacobi-preconditioned CG above (splu's fill-in grows fast on surface meshes: 0.25 s at
 #: 20k unknowns, 2.7 s at 51k, against about 0.2 s for a CG solve at 51k).
 AUTO_LU_MAX_UNKNOWNS = 20000
+
+#: relative residual at which the conjugate gradients stop. The solution is a trust-region step,
+#: clipped to ``trust`` times the distance to the nearest vertex and then line-searched, so
+#: solving it more finely buys nothing: on the target case's final smoothing (47k unknowns) 22
+#: iterations instead of the 36 that 1e-10 took, and the corpus's quality figures the same to four
+#: decimals (docs/optimisation.md).
+CG_RTOL = 1e-6
 #: curves of at most this many segments are scanned whole by :meth:`CurveSet.closest` (a
 #: compiled loop); longer ones go through its KD-tree of segment midpoints (same answers)
 SCAN_SEGMENTS = 512
@@ -898,7 +905,7 @@ class _Linear:
             d = self.H.diagonal()
             self.dinv = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
 
-    def solve(self, b, rtol: float = 1e-10, maxiter: int = 5000):
+    def solve(self, b, rtol: float = CG_RTOL, maxiter: int = 5000):
         if self.method == "lu":
             return self.lu.solve(b)
         x = np.zeros_like(b)
