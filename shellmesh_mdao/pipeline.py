@@ -502,15 +502,16 @@ def stage_quad(state: PipelineState) -> PipelineState:
     if done is None:
         done = _finish_quads(state, q, sup)
     q, sj, poor = done["mesh"], done["sj"], done["poor"]
-    if done["warning"]:
-        log.warning(done["warning"])
+    off_surface, warning = _off_surface(state, done, sup)
+    if warning:
+        log.warning(warning)
     st = state.but(mesh=q, supports=sup, stage="quad")
     if o.final_iterations:
         st.report["final_smooth"] = _smooth_report(res)
         st.report["final_smooth"]["warp_term"] = warp_term
     if done["repair"] is not None:
         st.report["poor_repair"] = done["repair"]
-    st.report["off_surface"] = done["off_surface"]
+    st.report["off_surface"] = off_surface
     st.report["planarize"] = done["planar"]
     st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),
                                   "folded": int((sj <= 0).sum()), "elements": poor[:100].tolist(),
@@ -525,13 +526,14 @@ def stage_quad(state: PipelineState) -> PipelineState:
 
 def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
     """The quad stage after its smoothing, on ``q``: skin nodes left off the surface settled,
-    elements at or below :data:`POOR_JACOBIAN` repaired, the nodes still off the surface
-    reported, then :func:`~shellmesh_mdao.quad.planarize`. Returns ``{"mesh", "sj", "poor",
-    "repair", "off_surface", "planar", "warning"}`` (the warning about the nodes off the surface,
-    or None: the caller logs it for the result it keeps); ``q`` and ``sup`` are not changed."""
+    elements at or below :data:`POOR_JACOBIAN` repaired, then :func:`~shellmesh_mdao.quad.planarize`.
+    Returns ``{"mesh", "sj", "poor", "repair", "settled", "before_planar", "planar"}``
+    (``before_planar``: the mesh before planarize, whose nodes off the surface
+    :func:`_off_surface` reports for the result the caller keeps); ``q`` and ``sup`` are not
+    changed."""
     from .mesh import vertex_faces
     from .quad import planarize, settle_off_surface
-    from .smooth import SURFACE, _face_rings, untangle
+    from .smooth import _face_rings, untangle
 
     o = state.options
     # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
@@ -554,10 +556,32 @@ def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
         if n2 <= len(poor) and (n2 < len(poor) or sj2.min() > sj.min()):
             q, sj = q2, sj2
             poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    before_planar = q
+    # quads still warped above the goal straddle kinks of the faceted input that no move along it
+    # can flatten: their free skin nodes leave the facets by at most planar_offset * size
+    planar = None
+    if o.planar_offset > 0:
+        q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
+                              guard_jacobian=POOR_JACOBIAN + 0.1)
+        planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
+        if planar["applied"]:
+            sj = scaled_jacobian(q.points, q.faces)
+            poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    return {"mesh": q, "sj": sj, "poor": poor, "repair": repair, "settled": settled, "before_planar": before_planar,
+            "planar": planar}
+
+
+def _off_surface(state: PipelineState, done: dict, sup) -> tuple[dict, str | None]:
+    """The report's ``off_surface`` and its warning (None if no node is off) for the result of
+    :func:`_finish_quads` the quad stage keeps (measured only for that one: a planarize trial
+    that is not kept needs neither)."""
+    from .smooth import SURFACE
+
     # skin nodes still off the input surface: the subdivision kept a new node at its linear position
     # where projecting it would fold a child, and neither its repair nor the one after the final
     # smoothing (settle_off_surface) could fix that (a parent face across a crease or a ridge much
     # tighter than the element size); measured before planarize, which moves nodes off on purpose
+    q, settled = done["before_planar"], done["settled"]
     skin_nodes = np.flatnonzero(sup.kind == SURFACE)
     d = sup.distance(q.points, skin_nodes) if len(skin_nodes) else np.zeros(0)
     off = d > OFF_SURFACE_TOL * q.diagonal
@@ -572,18 +596,7 @@ def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
                    f"({float(d[off].max() / state.size):.2f} element sizes) near "
                    f"{np.array2string(q.points[k], precision=4)}: a face spanned a crease or ridge much tighter "
                    "than the element size there; use a smaller --size or see the report's 'off_surface' (0-based ids)")
-    # quads still warped above the goal straddle kinks of the faceted input that no move along it
-    # can flatten: their free skin nodes leave the facets by at most planar_offset * size
-    planar = None
-    if o.planar_offset > 0:
-        q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
-                              guard_jacobian=POOR_JACOBIAN + 0.1)
-        planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
-        if planar["applied"]:
-            sj = scaled_jacobian(q.points, q.faces)
-            poor = np.flatnonzero(sj <= POOR_JACOBIAN)
-    return {"mesh": q, "sj": sj, "poor": poor, "repair": repair, "off_surface": off_surface, "planar": planar,
-            "warning": warning}
+    return off_surface, warning
 
 
 def _smooth_report(res) -> dict:
