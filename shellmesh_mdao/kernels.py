@@ -1463,20 +1463,33 @@ def _box_centre_sq_dist(p0, p1, p2, B, i):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _bvh_closest(Q, lo, hi, V, TB, tri_id, NB, child, start, cnt, slack, out, oid):
+def _bvh_closest(Q, lo, hi, V, TB, tri_id, NB, child, start, cnt, slack, out, oid, seed):
     """Rows ``lo .. hi - 1`` of ``out`` / ``oid``: the closest point of the triangles to Q[i]
     and its triangle. Depth first, the nearer child first (by box distance, then by the
     distance to the box centre); a box or a triangle's own box farther than the best
     squared distance so far (times ``1 + 1e-12``, plus ``slack``) is skipped, so every
     triangle that can tie with the answer is computed and the rule picks among them: the
-    least squared distance, then the lowest triangle id."""
+    least squared distance, then the lowest triangle id.
+
+    ``seed`` (empty, or one entry per row of Q): the leaf-order position of a triangle to
+    compute first (-1: none), e.g. the one a moved point was closest to before. It only sets
+    the first bound, which prunes more of the tree; the answer is the rule's all the same
+    (the answer's own distance never exceeds a bound, so it and every triangle that can tie
+    with it are still computed)."""
     stack = np.empty(256, np.int64)
     sd = np.empty(256)
     none = np.iinfo(np.int64).max
+    seeded = seed.shape[0] > 0
     for i in range(lo, hi):
         p0, p1, p2 = Q[i, 0], Q[i, 1], Q[i, 2]
         best, lim, bid = np.inf, np.inf, none
         x0 = x1 = x2 = np.nan
+        if seeded and seed[i] >= 0:
+            t = seed[i]
+            x0, x1, x2 = _closest_on_triangle(p0, p1, p2, V[t, 0], V[t, 1], V[t, 2], V[t, 3], V[t, 4], V[t, 5],
+                                              V[t, 6], V[t, 7], V[t, 8])
+            best, bid = _sq_dist(x0, x1, x2, p0, p1, p2), tri_id[t]
+            lim = best * (1.0 + 1e-12) + slack
         stack[0], sd[0], sp = 0, 0.0, 1
         while sp:
             sp -= 1
@@ -1569,6 +1582,8 @@ class TriangleBVH:
         thi = np.maximum(np.maximum(A, B), C)
         perm, self._box, self._child, self._start, self._cnt = _bvh_build(tlo, thi, int(leaf))
         self._tri_id = perm
+        self._pos = np.empty(len(perm), np.int64)                 # leaf-order position of each triangle
+        self._pos[perm] = np.arange(len(perm))
         self._V = np.ascontiguousarray(np.hstack([A[perm], B[perm], C[perm]]))      # corners in leaf order
         self._TB = np.ascontiguousarray(np.hstack([tlo[perm], thi[perm]]))
         ext = float(np.abs(P).max()) if len(P) else 0.0
@@ -1578,19 +1593,29 @@ class TriangleBVH:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self._box, self._child, self._start, self._cnt, self._tri_id, self._V,
-                                      self._TB))
+        return sum(a.nbytes for a in (self._box, self._child, self._start, self._cnt, self._tri_id, self._pos,
+                                      self._V, self._TB))
 
-    def closest(self, q, threads: int = 1):
+    def closest(self, q, threads: int = 1, hint=None):
         """``(points (k, 3), triangle (k,))`` for queries ``q`` (k, 3) float64 (finite: checked
         by the caller); with ``threads`` > 1, contiguous blocks of at least 2048 queries are
-        answered in up to that many threads (the kernel releases the GIL)."""
+        answered in up to that many threads (the kernel releases the GIL). ``hint`` (k,): a
+        triangle near each query to try first (-1 or out of range: none), e.g. the one a point
+        that has since moved a little was closest to; it saves a part of the search and does
+        not change the answer."""
         q = np.ascontiguousarray(q, dtype=np.float64)
         k = len(q)
         out = np.empty((k, 3))
         oid = np.empty(k, np.int64)
+        seed = np.empty(0, np.int64)
+        if hint is not None:
+            hint = np.asarray(hint, dtype=np.int64).reshape(-1)
+            if len(hint) != k:
+                raise ValueError(f"TriangleBVH.closest: hint needs one entry per query, got {len(hint)} for {k}")
+            ok = (hint >= 0) & (hint < len(self._pos))
+            seed = np.where(ok, self._pos[np.where(ok, hint, 0)], -1)
         args = (self._V, self._TB, self._tri_id, self._box, self._child, self._start, self._cnt, self._slack,
-                out, oid)
+                out, oid, seed)
         nt = max(1, min(int(threads), k // 2048))
         cuts = np.linspace(0, k, nt + 1).astype(np.int64)
         workers = [_Background(_bvh_closest, q, int(cuts[j]), int(cuts[j + 1]), *args) for j in range(1, nt)]
@@ -2027,7 +2052,7 @@ def _collapse_score(ai, bi, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old,
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _facing_score(ai, bi, fptr, vf, F, P, kind, vtri, tri_n, cos_facing, bvh_V, bvh_TB, bvh_id, bvh_box, bvh_child,
-                  bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout):
+                  bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout, noseed):
     """The micro collapses' test of collapsing ``ai`` into ``bi``: no new face standing across
     the input (:func:`_facing_one`) nor facing against the input triangle closest to its
     centroid (the :class:`TriangleBVH` arrays, queries shifted by ``center`` as
@@ -2045,7 +2070,8 @@ def _facing_score(ai, bi, fptr, vf, F, P, kind, vtri, tri_n, cos_facing, bvh_V, 
             return np.inf
         for k in range(3):
             q[0, k] = (P[q0, k] + P[q1, k] + P[q2, k]) / 3 - center[k]
-        _bvh_closest(q, 0, 1, bvh_V, bvh_TB, bvh_id, bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, qout, qid)
+        _bvh_closest(q, 0, 1, bvh_V, bvh_TB, bvh_id, bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, qout, qid,
+                     noseed)
         t = qid[0]
         if not _dot3e(n0, n1, n2, tri_n[t, 0], tri_n[t, 1], tri_n[t, 2]) > 0:
             return np.inf
@@ -2069,6 +2095,7 @@ def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr
     q = np.empty((1, 3))
     qout = np.empty((1, 3))
     qid = np.empty(1, np.int64)
+    noseed = np.empty(0, np.int64)
     na = 0
     win = _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand)
     for wave in range(max_sub):
@@ -2085,7 +2112,8 @@ def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr
                 a, b = (u[c], v[c]) if dirn == 0 else (v[c], u[c])
                 if facing_only:
                     sc = _facing_score(a, b, fptr, vf, F, P, kind, vtri, tri_n, cos_facing, bvh_V, bvh_TB, bvh_id,
-                                       bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout)
+                                       bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout,
+                                       noseed)
                 else:
                     sc = _collapse_score(a, b, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind,
                                          vtri, tri_n, cos_facing)

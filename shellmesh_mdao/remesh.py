@@ -658,19 +658,20 @@ class _Surface:
             self._ctree = cKDTree(self.P[self.T].mean(1))
         return self._ctree
 
-    def project(self, q, nrm, patch=None, min_dot=0.0):
+    def project(self, q, nrm, patch=None, min_dot=0.0, hint=None):
         """Closest point of each ``q`` among the input triangles of ``patch`` (if given) whose
-        normal has a dot product > ``min_dot`` with ``nrm``.
+        normal has a dot product > ``min_dot`` with ``nrm``; ``hint`` (optional): an input
+        triangle near each ``q`` to start the search from (the answer does not depend on it).
 
         Returns ``(points, triangle, ok)``; where no such triangle is found ``ok`` is False
         and the plain closest point is returned."""
         return _project_compatible(self.loc, self._centroid_tree, self.tri_n,
                                    self.tri_patch if patch is not None else None,
-                                   q, nrm, patch, min_dot)
+                                   q, nrm, patch, min_dot, hint)
 
 
-def _project_compatible(loc, tree_fn, tri_n, tri_patch, q, nrm, patch, min_dot):
-    cl, ti, _ = loc.closest(q)
+def _project_compatible(loc, tree_fn, tri_n, tri_patch, q, nrm, patch, min_dot, hint=None):
+    cl, ti, _ = loc.closest(q, hint=hint)
     ti = np.asarray(ti, dtype=np.int64)
     ok = _dot(tri_n[ti], nrm) > min_dot
     if tri_patch is not None:
@@ -890,10 +891,10 @@ class _Ctx:
             self._tree = cKDTree(self.loc.points[self.loc.triangles].mean(1))
         return self._tree
 
-    def project(self, q, nrm, patch):
+    def project(self, q, nrm, patch, hint=None):
         return _project_compatible(self.loc, self._centroid_tree, self.tri_n,
                                    self.surf.tri_patch if self.use_patch else None,
-                                   q, nrm, patch if self.use_patch else None, self.min_dot)
+                                   q, nrm, patch if self.use_patch else None, self.min_dot, hint)
 
     def sizing(self, W, idx=None):
         """Sizing of vertices ``idx`` of W from the input field (target for improve_triangles)."""
@@ -1044,7 +1045,7 @@ def _split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
         mid = 0.5 * (P[a[rm]] + P[b[rm]])
         fn = W.face_normals()
         nrm = fn[f0[rm]] + np.where((f1[rm] >= 0)[:, None], fn[np.maximum(f1[rm], 0)], 0.0)
-        pts, tri, okr = ctx.project(mid, _unit(nrm), W.fpatch[f0[rm]])
+        pts, tri, okr = ctx.project(mid, _unit(nrm), W.fpatch[f0[rm]], hint=W.vtri[a[rm]])
         if forced is not None:
             pts, tri, okr = _across_ridge(ctx, P[a[rm]], P[b[rm]], mid, nrm, fn[f0[rm]],
                                           W.fpatch[f0[rm]], pts, tri, okr)
@@ -1384,12 +1385,15 @@ def _flip_round(W, ctx, mode):
         k = np.flatnonzero(ok)
         Pa, Pb, Pc, Pd = P[a[k]], P[b[k]], P[c[k]], P[d[k]]
         mid = 0.5 * (Pc + Pd)
-        _, _, dm = ctx.loc.closest(mid)
-        good = dm <= ctx.delta
         C0 = (Pa + Pd + Pc) / 3.0
         C1 = (Pd + Pb + Pc) / 3.0
-        _, t0, _ = ctx.loc.closest(C0)
-        _, t1, _ = ctx.loc.closest(C1)
+        # the new edge's midpoint and the new faces' centroids in one query (each answer is its
+        # own), the search for each starting at c's input triangle
+        nk = len(k)
+        hc = W.vtri[c[k]]
+        _, t3, d3 = ctx.loc.closest(np.vstack([mid, C0, C1]), hint=np.concatenate([hc, hc, hc]))
+        dm, t0, t1 = d3[:nk], t3[nk:2 * nk], t3[2 * nk:]
+        good = dm <= ctx.delta
         good &= (_dot(m0[k], ctx.tri_n[t0]) > 0) & (_dot(m1[k], ctx.tri_n[t1]) > 0)
         ok[k[~good]] = False
     if not ok.any():
@@ -1452,7 +1456,7 @@ def _relax(W, ctx, lam=1.0, move_chains=True, movable=None, min_angle_floor=10.0
         dvec = cen - P[ri]
         dvec -= _dot(dvec, vn[ri])[:, None] * vn[ri]
         q = P[ri] + lam * dvec
-        pts, tri, ok = ctx.project(q, vn[ri], W.vertex_patch()[ri])
+        pts, tri, ok = ctx.project(q, vn[ri], W.vertex_patch()[ri], hint=W.vtri[ri])
         ri, pts, tri = ri[ok], pts[ok], tri[ok]
         newP[ri] = pts
         newtri[ri] = tri
@@ -1657,10 +1661,10 @@ def _deviation(W, ctx):
     T = W.topo()
     E = T.E
     mid = 0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]])
-    _, _, dm = ctx.loc.closest(mid)
+    _, _, dm = ctx.loc.closest(mid, hint=W.vtri[E[:, 0]])
     C = (W.P[W.F[:, 0]] + W.P[W.F[:, 1]] + W.P[W.F[:, 2]]) / 3
     fn = W.face_normals()
-    cp, ctri, ok = ctx.project(C, fn, W.fpatch)
+    cp, ctri, ok = ctx.project(C, fn, W.fpatch, hint=W.vtri[W.F[:, 0]])
     dc = _norm(cp - C)
     return dm, dc, ctri, ok
 
@@ -1830,7 +1834,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         T = W.topo()
         E = T.E
         L = edge_lengths(W.P, E)
-        _, _, dm = surf.loc.closest(0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]]))
+        _, _, dm = surf.loc.closest(0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]]), hint=W.vtri[E[:, 0]])
         over = np.flatnonzero((dm > delta) & (L > 2.0 * h_min))
         if not len(over):
             break

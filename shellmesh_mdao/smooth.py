@@ -263,14 +263,16 @@ class _Surface:
             self._ctree = cKDTree((P[T[:, 0]] + P[T[:, 1]] + P[T[:, 2]]) / 3.0)
         return self._ctree
 
-    def project(self, q, nrm=None, min_dot: float = 0.0):
+    def project(self, q, nrm=None, min_dot: float = 0.0, hint=None):
         """Closest point on the surface; with normals ``nrm`` restricted to triangles whose
-        normal has a dot product > ``min_dot`` with it. Returns ``(points, ok)``; ``ok`` is
-        False where no compatible triangle was found nearby (the plain closest point is
-        returned there)."""
-        cl, ti, _ = self.loc.closest(q)
+        normal has a dot product > ``min_dot`` with it. Returns ``(points, ok, tri)``; ``ok``
+        is False where no compatible triangle was found nearby (the plain closest point is
+        returned there); ``tri`` the plain closest point's triangle, a ``hint`` (see
+        :meth:`~shellmesh_mdao.project.SurfaceLocator.closest`) for the next query of a point
+        that moves on from there."""
+        cl, ti, _ = self.loc.closest(q, hint=hint)
         if nrm is None:
-            return cl, np.ones(len(cl), bool)
+            return cl, np.ones(len(cl), bool), ti
         ok = _dot(self.tri_n[ti], nrm) > min_dot
         bad = np.flatnonzero(~ok)
         T, P = self.loc.triangles, self.loc.points
@@ -296,7 +298,7 @@ class _Surface:
                 cl[rows] = x[pick]
                 ok[rows] = True
             bad = np.flatnonzero(~ok)
-        return cl, ok
+        return cl, ok, ti
 
 
 @dataclass
@@ -400,16 +402,22 @@ class Supports:
         return out
 
     # ------------------------------------------------------------------ projection
-    def project_kind(self, x, kind, ref, normals=None, min_dot: float = 0.0):
+    def project_kind(self, x, kind, ref, normals=None, min_dot: float = 0.0, hint=None, return_tri: bool = False):
         """Project points ``x`` (k, 3) onto the supports ``(kind, ref)`` (k,) each.
 
         FIXED rows are returned unchanged. SURFACE rows use ``normals`` (k, 3) if given to
-        reject triangles facing the other way. Returns ``(points, ok)``."""
+        reject triangles facing the other way. Returns ``(points, ok)``, and with
+        ``return_tri`` also ``tri`` (k,): each SURFACE row's closest input triangle (-1 on the
+        other rows), which as ``hint`` (k,) of a later call for the same points, moved a
+        little, saves a part of the search without changing the answer."""
         x = np.asarray(x, np.float64).reshape(-1, 3)
         kind = np.asarray(kind).reshape(-1)
         ref = np.asarray(ref, np.int64).reshape(-1)
         out = x.copy()
         ok = np.ones(len(x), bool)
+        tri = np.full(len(x), -1, np.int64)
+        if hint is not None:
+            hint = np.asarray(hint, np.int64).reshape(-1)
         pl = np.flatnonzero(kind == PLANE)
         if len(pl):
             p0 = self.planes[ref[pl], 0]
@@ -422,8 +430,9 @@ class Supports:
         for r in np.unique(ref[sel]).tolist():            # one call per surface
             rows = sel[ref[sel] == r]
             nrm = None if normals is None else np.asarray(normals, np.float64)[rows]
-            out[rows], ok[rows] = self._surf[r].project(x[rows], nrm, min_dot)
-        return out, ok
+            out[rows], ok[rows], tri[rows] = self._surf[r].project(x[rows], nrm, min_dot,
+                                                                   None if hint is None else hint[rows])
+        return (out, ok, tri) if return_tri else (out, ok)
 
     def project(self, points, idx=None, normals=None, min_dot: float = 0.0):
         """Project the vertices ``idx`` (default all) at ``points[idx]`` onto their supports.
@@ -1195,6 +1204,8 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     if solver == "auto":
         method = "lu" if int(dof.sum()) <= AUTO_LU_MAX_UNKNOWNS else "cg"
     moves, halvings, rejected, nfact, n_jump, n_fold = [], 0, 0, 0, 0, 0
+    # each vertex's closest input triangle at its last projection: where the next query starts
+    hint = np.full(n, -1, np.int64)
     lin = T = nrm = ortho = warpt = hess = None
     it = 0
     for it in range(1, iterations + 1):
@@ -1286,8 +1297,9 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
             X[todo] = P[todo]
             if len(live):
                 step = alpha[live, None] * D[live]
-                x, ok = supports.project_kind(P[live] + step, supports.kind[live], supports.ref[live],
-                                              nrm[live], min_dot)
+                x, ok, tri = supports.project_kind(P[live] + step, supports.kind[live], supports.ref[live],
+                                                   nrm[live], min_dot, hint=hint[live], return_tri=True)
+                hint[live] = tri
                 jump = _norm(x - (P[live] + step)) > _norm(step) + 1e-12 * scale
                 X[live] = x
                 badv = live[~ok | jump]

@@ -386,3 +386,29 @@ def test_closest_does_not_depend_on_threads_batches_or_order():
     # and a leaf size of 1 (a deeper tree) gives the same answers
     deep = TriangleBVH(P, T, leaf=1).closest(q)
     assert np.array_equal(deep[1], one[1]) and np.array_equal(deep[0], one[0])
+
+
+@pytest.mark.parametrize("make", [sphere, soup])
+def test_closest_with_a_hint_gives_the_same_answers(make):
+    """A hint (a triangle to try first) only starts the search: with the right triangle, a
+    neighbour, a far or random one, none (-1) or one out of range, the answer is the
+    unhinted one bit for bit, ties on vertices and edges (least distance, lowest index)
+    included; a hint of the wrong length is refused."""
+    from shellmesh_mdao.kernels import TriangleBVH
+    P, T = make()
+    rng = np.random.default_rng(3)
+    q = np.vstack([P[T[:200, 1]], 0.5 * (P[T[:200, 1]] + P[T[:200, 2]]),   # ties on vertices, edges
+                   P[T[:200, 0]] + 1e-3 * rng.normal(size=(200, 3)), rng.uniform(-1.2, 1.2, (400, 3))])
+    loc = SurfaceLocator(P, T)
+    cp, tri, d = loc.closest(q)
+    k = len(q)
+    for hint in (tri, (tri + 1) % len(T), np.full(k, len(T) - 1), rng.integers(0, len(T), k),
+                 np.full(k, -1), rng.integers(-3 * len(T), 3 * len(T), k)):
+        cp2, tri2, d2 = loc.closest(q, hint=hint)
+        assert np.array_equal(tri2, tri) and np.array_equal(cp2, cp) and np.array_equal(d2, d)
+    bvh = TriangleBVH(P, T)
+    plain = bvh.closest(q, threads=2)
+    hinted = bvh.closest(q, threads=2, hint=rng.integers(0, len(T), k))
+    assert np.array_equal(plain[0], hinted[0]) and np.array_equal(plain[1], hinted[1])
+    with pytest.raises(ValueError, match="one entry per query"):
+        bvh.closest(q, hint=tri[:-1])

@@ -87,6 +87,28 @@ def test_derive_supports_kinds():
         derive_supports(mesh, None, planes, curves)
 
 
+def test_project_kind_hints_and_triangles():
+    """project_kind(return_tri=True) also gives each SURFACE row's closest input triangle (the
+    locator's, -1 on the other rows); handed back as ``hint`` for points moved a little it
+    changes nothing, bit for bit (the smoothing's line search does this every step)."""
+    mesh, loc, planes, curves = t_mesh()
+    sup = derive_supports(mesh, loc, planes, curves, sliding=True)
+    rng = np.random.default_rng(2)
+    x = mesh.points + 0.02 * rng.normal(size=mesh.points.shape)
+    nrm = np.tile([0.0, 0.0, 1.0], (len(x), 1))
+    plain = sup.project_kind(x, sup.kind, sup.ref, nrm)
+    out, ok, tri = sup.project_kind(x, sup.kind, sup.ref, nrm, return_tri=True)
+    assert np.array_equal(out, plain[0]) and np.array_equal(ok, plain[1])
+    surf = sup.kind == SURFACE
+    assert surf.sum() >= 10 and (tri[~surf] == -1).all()
+    assert np.array_equal(tri[surf], loc.closest(x[surf])[1])
+    moved = x + 0.02 * rng.normal(size=x.shape)
+    for hint in (tri, rng.integers(-5, len(loc.triangles) + 5, len(x))):
+        again = sup.project_kind(moved, sup.kind, sup.ref, nrm, hint=hint, return_tri=True)
+        ref = sup.project_kind(moved, sup.kind, sup.ref, nrm, return_tri=True)
+        assert all(np.array_equal(a, b) for a, b in zip(again, ref))
+
+
 def test_chain_on_two_curves_slides_on_one():
     """A member chain lies on the member plane's exact section AND on the polyline of its own
     feature edges (the pipeline passes both): every chain edge goes to the first curve, so
