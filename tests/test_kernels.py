@@ -1253,3 +1253,22 @@ def test_centroid_d2_gives_the_numpy_bits():
     x = rng.normal(size=3)
     cen = (P[T[:, 0]] + P[T[:, 1]] + P[T[:, 2]]) / 3
     assert centroid_d2(P, T, x).tobytes() == reduce_short((cen - x) ** 2, "sum").tobytes()
+
+
+def test_index_checks_match_numpys_min_and_max():
+    """The kernels' index check (a compiled pass for int64 arrays, numpy's min and max for the
+    others) accepts exactly the arrays whose entries are all in [0, n), 2-D, non-contiguous
+    and int32 ones included, and names the range it found."""
+    from shellmesh_mdao.kernels import _check_index
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        n = int(rng.integers(1, 50))
+        a = rng.integers(-2, n + 2, size=int(rng.integers(1, 40)))
+        for arr in (a, a.reshape(-1, 1), np.repeat(a, 2)[::2], a.astype(np.int32)):
+            good = a.min() >= 0 and a.max() < n
+            if good:
+                _check_index("x", arr, n)
+            else:
+                with pytest.raises(ValueError, match=rf"x holds indices outside \[0, {n}\): {a.min()}\.\.{a.max()}"):
+                    _check_index("x", arr, n)
+    _check_index("x", np.zeros(0, np.int64), 0)
