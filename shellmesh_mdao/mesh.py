@@ -528,16 +528,20 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
     lo = np.minimum(he_from, he_to)
     hi = np.maximum(he_from, he_to)
     if len(lo):
-        n = int(hi.max()) + 1
-        ukey, he_edge = np.unique(lo * n + hi, return_inverse=True)   # one int64 key: ~10x faster than axis=0
-        edges = np.stack([ukey // n, ukey % n], 1)
-        he_edge = he_edge.reshape(-1)
+        # the half-edges in the order of their node pairs (two counting sorts, stable: within a
+        # pair, in half-edge order, which is face order); each run of one pair is an edge
+        order = _k.stable_pair_order(lo, hi, int(hi.max()) + 1)
+        slo, shi = lo[order], hi[order]
+        first = np.ones(len(order), bool)
+        first[1:] = (slo[1:] != slo[:-1]) | (shi[1:] != shi[:-1])
+        edges = np.stack([slo[first], shi[first]], 1)
+        he_edge = np.empty(len(order), np.int64)
+        he_edge[order] = np.cumsum(first) - 1
     else:
-        edges, he_edge = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+        edges, he_edge, order = np.zeros((0, 2), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
     face_edges = np.full((m, 4), -1, dtype=np.int64)
     face_edges[he_face, he_side] = he_edge
     valence = np.bincount(he_edge, minlength=len(edges))
-    order = np.lexsort((he_face, he_edge))
     ptr = np.zeros(len(edges) + 1, dtype=np.int64)
     np.cumsum(valence, out=ptr[1:])
     return EdgeTopology(edges.astype(np.int64), face_edges, valence, ptr, he_face[order],

@@ -246,3 +246,42 @@ def test_reduce_short_gives_numpy_bits(seed):
             for how in ("sum", "any", "all"):
                 got, ref = reduce_short(b, how, axis), getattr(b, how)(axis)
                 assert got.dtype == ref.dtype and np.array_equal(got, ref), how
+
+
+def _edge_topology_by_unique(faces):
+    """The edge table as edge_topology built it before its counting sorts: np.unique of the
+    int64 keys lo * n + hi, edge_faces by lexsort."""
+    faces = np.asarray(faces, np.int64)
+    m = len(faces)
+    b = np.roll(faces, -1, axis=1)
+    tri = faces[:, 3] < 0
+    b[tri, 2] = faces[tri, 0]
+    valid = np.ones((m, 4), bool)
+    valid[tri, 3] = False
+    he_face, he_side = np.nonzero(valid)
+    fr, to = faces[he_face, he_side], b[he_face, he_side]
+    lo, hi = np.minimum(fr, to), np.maximum(fr, to)
+    n = int(hi.max()) + 1
+    ukey, he_edge = np.unique(lo * n + hi, return_inverse=True)
+    edges = np.stack([ukey // n, ukey % n], 1)
+    return edges, he_edge.reshape(-1), he_face[np.lexsort((he_face, he_edge.reshape(-1)))]
+
+
+def test_edge_topology_matches_the_unique_keys():
+    """edge_topology's counting sorts give np.unique's edges (sorted by node pair), each
+    half-edge's edge and the faces of each edge in face order, on mixed meshes with
+    non-manifold edges, repeated faces and unused nodes; an empty face array has no edges."""
+    rng = np.random.default_rng(8)
+    for _ in range(30):
+        n = int(rng.integers(4, 60))
+        m = int(rng.integers(1, 80))
+        faces = np.stack([rng.choice(n, 4, replace=False) for _ in range(m)])
+        faces[rng.random(m) < 0.4, 3] = -1                                  # triangles
+        faces = np.vstack([faces, faces[: m // 5]])                          # repeated faces
+        t = edge_topology(faces)
+        edges, he_edge, edge_faces = _edge_topology_by_unique(faces)
+        assert np.array_equal(t.edges, edges) and np.array_equal(t.he_edge, he_edge)
+        assert np.array_equal(t.edge_faces, edge_faces)
+        assert np.array_equal(t.valence, np.bincount(he_edge, minlength=len(edges)))
+    t = edge_topology(np.zeros((0, 4), np.int64))
+    assert t.edges.shape == (0, 2) and len(t.edge_faces) == 0
