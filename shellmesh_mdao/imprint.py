@@ -32,7 +32,7 @@ from scipy.spatial import cKDTree
 from .errors import ImprintError
 from .kernels import (centroid_d2, chain_walk, corner_cosines, edge_lookup, edge_rows, edge_table, greedy_independent,
                       segments_scan, segments_within, skin_flips, star_moves)
-from .mesh import ShellMesh, bbox_diagonal, cross_rows, reduce_short, vertex_faces, norm_rows
+from .mesh import ShellMesh, bbox_diagonal, cross_rows, norm_rows, reduce_short, unique_edges, vertex_faces
 from .section import Plane, SectionArc, plane_section, section_arc
 
 __all__ = ["ChainSpec", "ChainResult", "closest_on_polyline", "insert_point", "cut_chain",
@@ -765,7 +765,7 @@ def _split_edges_between(P, T, C, verts, locator):
     hit = is_v[a] & is_v[b]
     if not hit.any():
         return P, T, C, (np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
-    e = np.unique(np.sort(np.stack([a[hit], b[hit]], 1), axis=1), axis=0)
+    e = unique_edges(a[hit], b[hit])
     P, T, C, new_id = _split_at_surface_midpoints(P, T, C, e, locator)
     return P, T, C, (e, new_id)
 
@@ -866,8 +866,7 @@ def split_member_bridges(mesh: ShellMesh, chains, locator) -> ShellMesh:
     cols = np.concatenate([np.full(len(c.vertices), col[c.member], np.int64) for c in chains])
     on = np.zeros((len(P), len(members)), bool)
     on[rows, cols] = True
-    a, b = T.ravel(), np.roll(T, -1, axis=1).ravel()
-    e = np.unique(np.sort(np.stack([a, b], 1), axis=1), axis=0)
+    e = unique_edges(T.ravel(), np.roll(T, -1, axis=1).ravel())
     cand = e[on[e[:, 0]].any(1) & on[e[:, 1]].any(1)]
     if not len(cand):
         return mesh
@@ -1769,7 +1768,7 @@ def coarsen_chains(mesh: ShellMesh, locator, chains, target: float, max_ratio: f
                     on_chain = np.zeros(n, bool)
                     for arr in chain_vs:
                         on_chain[arr] = True
-                    ek = np.unique(np.sort(np.stack([T.ravel(), np.roll(T, -1, 1).ravel()], 1), axis=1), axis=0)
+                    ek = unique_edges(T.ravel(), np.roll(T, -1, 1).ravel())
                     a, b = ek[:, 0], ek[:, 1]
                     v = np.concatenate([a, b])
                     u = np.concatenate([b, a])

@@ -512,6 +512,23 @@ def _unique_edges_with_ids(fe: np.ndarray, ids: np.ndarray):
     return np.ascontiguousarray(fe[keep]), np.ascontiguousarray(ids[keep])
 
 
+def unique_edges(a, b) -> np.ndarray:
+    """The distinct node pairs among ``(a[i], b[i])`` (non-negative ids, either order), each
+    as (lower, higher), sorted: ``np.unique(np.sort(np.stack([a, b], 1), axis=1), axis=0)``'s
+    array, by two counting sorts (:func:`~shellmesh_mdao.kernels.stable_pair_order`) instead
+    of a row sort."""
+    a = np.asarray(a, np.int64).reshape(-1)
+    b = np.asarray(b, np.int64).reshape(-1)
+    if not len(a):
+        return np.zeros((0, 2), np.int64)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = _k.stable_pair_order(lo, hi, int(hi.max()) + 1)
+    slo, shi = lo[order], hi[order]
+    first = np.ones(len(order), bool)
+    first[1:] = (slo[1:] != slo[:-1]) | (shi[1:] != shi[:-1])
+    return np.stack([slo[first], shi[first]], 1)
+
+
 def edge_topology(faces: np.ndarray) -> EdgeTopology:
     """Build the :class:`EdgeTopology` of an (m, 4) face array (vectorised)."""
     faces = _as_faces(faces)

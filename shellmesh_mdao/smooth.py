@@ -66,7 +66,8 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, ProjectionError
 from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
                       face_quality, min_corner_sj, ortho_gradient, ortho_jacobian, pair_difference)
-from .mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows, vertex_faces
+from .mesh import (ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows, unique_edges,
+                   vertex_faces)
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
 
@@ -457,7 +458,8 @@ def polylines_from_edges(points, edges) -> list:
     Deterministic: chains are ordered by their smallest edge index and walk from the
     lower-index end (closed loops from their lowest node, towards its lower neighbour); one
     compiled walk (:func:`~shellmesh_mdao.kernels.chain_walk`)."""
-    e = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), axis=1), axis=0)
+    e = np.asarray(edges, np.int64).reshape(-1, 2)
+    e = unique_edges(e[:, 0], e[:, 1])
     e = e[e[:, 0] != e[:, 1]]
     if not len(e):
         return []

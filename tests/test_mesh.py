@@ -285,3 +285,17 @@ def test_edge_topology_matches_the_unique_keys():
         assert np.array_equal(t.valence, np.bincount(he_edge, minlength=len(edges)))
     t = edge_topology(np.zeros((0, 4), np.int64))
     assert t.edges.shape == (0, 2) and len(t.edge_faces) == 0
+
+
+def test_unique_edges_matches_numpys_row_unique():
+    """unique_edges: the distinct pairs, each (lower, higher), in sorted order, as np.unique of
+    the sorted rows gives them (self-pairs and repeats included; nothing for no pairs)."""
+    from shellmesh_mdao.mesh import unique_edges
+    rng = np.random.default_rng(12)
+    for _ in range(200):
+        k, n = int(rng.integers(1, 60)), int(rng.integers(1, 40))
+        a, b = rng.integers(0, n, k), rng.integers(0, n, k)
+        ref = np.unique(np.sort(np.stack([a, b], 1), axis=1), axis=0)
+        got = unique_edges(a, b)
+        assert got.dtype == np.int64 and np.array_equal(got, ref)
+    assert unique_edges([], []).shape == (0, 2)
