@@ -512,21 +512,27 @@ def _unique_edges_with_ids(fe: np.ndarray, ids: np.ndarray):
     return np.ascontiguousarray(fe[keep]), np.ascontiguousarray(ids[keep])
 
 
-def unique_edges(a, b) -> np.ndarray:
-    """The distinct node pairs among ``(a[i], b[i])`` (non-negative ids, either order), each
-    as (lower, higher), sorted: ``np.unique(np.sort(np.stack([a, b], 1), axis=1), axis=0)``'s
-    array, by two counting sorts (:func:`~shellmesh_mdao.kernels.stable_pair_order`) instead
-    of a row sort."""
-    a = np.asarray(a, np.int64).reshape(-1)
-    b = np.asarray(b, np.int64).reshape(-1)
-    if not len(a):
-        return np.zeros((0, 2), np.int64)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
+def _pair_runs(lo, hi):
+    """The pairs ``(lo[i], hi[i])`` (non-empty, non-negative ids) in sorted order, stably (two
+    counting sorts, :func:`~shellmesh_mdao.kernels.stable_pair_order`): ``(order, first,
+    pairs)``, ``first`` marking the first of each run of one pair in that order and ``pairs``
+    (runs, 2) the distinct pairs."""
     order = _k.stable_pair_order(lo, hi, int(hi.max()) + 1)
     slo, shi = lo[order], hi[order]
     first = np.ones(len(order), bool)
     first[1:] = (slo[1:] != slo[:-1]) | (shi[1:] != shi[:-1])
-    return np.stack([slo[first], shi[first]], 1)
+    return order, first, np.stack([slo[first], shi[first]], 1)
+
+
+def unique_edges(a, b) -> np.ndarray:
+    """The distinct node pairs among ``(a[i], b[i])`` (non-negative ids, either order), each
+    as (lower, higher), sorted: ``np.unique(np.sort(np.stack([a, b], 1), axis=1), axis=0)``'s
+    array, by two counting sorts instead of a row sort."""
+    a = np.asarray(a, np.int64).reshape(-1)
+    b = np.asarray(b, np.int64).reshape(-1)
+    if not len(a):
+        return np.zeros((0, 2), np.int64)
+    return _pair_runs(np.minimum(a, b), np.maximum(a, b))[2]
 
 
 def edge_topology(faces: np.ndarray) -> EdgeTopology:
@@ -545,13 +551,9 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
     lo = np.minimum(he_from, he_to)
     hi = np.maximum(he_from, he_to)
     if len(lo):
-        # the half-edges in the order of their node pairs (two counting sorts, stable: within a
-        # pair, in half-edge order, which is face order); each run of one pair is an edge
-        order = _k.stable_pair_order(lo, hi, int(hi.max()) + 1)
-        slo, shi = lo[order], hi[order]
-        first = np.ones(len(order), bool)
-        first[1:] = (slo[1:] != slo[:-1]) | (shi[1:] != shi[:-1])
-        edges = np.stack([slo[first], shi[first]], 1)
+        # the half-edges in the order of their node pairs (stable: within a pair, in half-edge
+        # order, which is face order); each run of one pair is an edge
+        order, first, edges = _pair_runs(lo, hi)
         he_edge = np.empty(len(order), np.int64)
         he_edge[order] = np.cumsum(first) - 1
     else:

@@ -248,19 +248,10 @@ def test_reduce_short_gives_numpy_bits(seed):
                 assert got.dtype == ref.dtype and np.array_equal(got, ref), how
 
 
-def _edge_topology_by_unique(faces):
-    """The edge table as edge_topology built it before its counting sorts: np.unique of the
-    int64 keys lo * n + hi, edge_faces by lexsort."""
-    faces = np.asarray(faces, np.int64)
-    m = len(faces)
-    b = np.roll(faces, -1, axis=1)
-    tri = faces[:, 3] < 0
-    b[tri, 2] = faces[tri, 0]
-    valid = np.ones((m, 4), bool)
-    valid[tri, 3] = False
-    he_face, he_side = np.nonzero(valid)
-    fr, to = faces[he_face, he_side], b[he_face, he_side]
-    lo, hi = np.minimum(fr, to), np.maximum(fr, to)
+def _edge_table_by_unique(he_face, he_from, he_to):
+    """The edge table of the half-edges as edge_topology built it before its counting sorts:
+    np.unique of the int64 keys lo * n + hi, edge_faces by lexsort."""
+    lo, hi = np.minimum(he_from, he_to), np.maximum(he_from, he_to)
     n = int(hi.max()) + 1
     ukey, he_edge = np.unique(lo * n + hi, return_inverse=True)
     edges = np.stack([ukey // n, ukey % n], 1)
@@ -279,7 +270,8 @@ def test_edge_topology_matches_the_unique_keys():
         faces[rng.random(m) < 0.4, 3] = -1                                  # triangles
         faces = np.vstack([faces, faces[: m // 5]])                          # repeated faces
         t = edge_topology(faces)
-        edges, he_edge, edge_faces = _edge_topology_by_unique(faces)
+        assert len(t.he_face) == 4 * len(faces) - int((faces[:, 3] < 0).sum())
+        edges, he_edge, edge_faces = _edge_table_by_unique(t.he_face, t.he_from, t.he_to)
         assert np.array_equal(t.edges, edges) and np.array_equal(t.he_edge, he_edge)
         assert np.array_equal(t.edge_faces, edge_faces)
         assert np.array_equal(t.valence, np.bincount(he_edge, minlength=len(edges)))
