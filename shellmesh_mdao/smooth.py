@@ -66,8 +66,8 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, ProjectionError
 from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
                       face_quality, min_corner_sj, ortho_gradient, ortho_jacobian, pair_difference)
-from .mesh import (ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows, unique_edges,
-                   vertex_faces)
+from .mesh import (ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows,
+                   unique_edges, vertex_faces)
 from .project import SurfaceLocator, closest_point_on_triangles
 from .quality import warp
 
