@@ -33,6 +33,7 @@ import numpy as np
 from scipy import sparse
 
 from .errors import MeshValidationError
+from .kernels import safe_matching_rounds
 from .mesh import ShellMesh, norm_rows
 from .split import _fixed_edge_mask, _highs_solve, polygon_energy
 
@@ -176,50 +177,11 @@ def _safe_reduction(f0, f1, w, n_faces, max_rounds: int = 100):
 
     With gains ``g = -w > 0``: if ``g(uv) >= best other gain at u + best other gain at v``
     then replacing, in any optimal matching, the edges at u and v by uv loses nothing, so
-    uv can be fixed to 1 and u, v removed.  Rounds are vectorised; within a round only
-    safe edges that are the best-ranked safe edge at both their triangles are taken, so
-    they form a matching.  Returns ``(taken, remaining)`` boolean masks over the edges."""
-    k = len(w)
-    g = -w
-    rank = np.empty(k, dtype=np.int64)
-    rank[np.lexsort((np.arange(k), w))] = np.arange(k)
-    taken = np.zeros(k, bool)
-    active = np.ones(k, bool)
-    matched = np.zeros(n_faces, bool)
-    for _ in range(max_rounds):
-        idx = np.flatnonzero(active)
-        if not len(idx):
-            break
-        tri = np.concatenate([f0[idx], f1[idx]])
-        eid = np.concatenate([idx, idx])
-        o = np.lexsort((rank[eid], tri))
-        tri, eid = tri[o], eid[o]
-        start = np.r_[True, tri[1:] != tri[:-1]]
-        first = np.flatnonzero(start)
-        best1 = np.full(n_faces, -1, dtype=np.int64)
-        best1[tri[first]] = eid[first]
-        sec = first + 1
-        has2 = (sec < len(tri))
-        has2[has2] = tri[sec[has2]] == tri[first[has2]]
-        best2 = np.full(n_faces, -1, dtype=np.int64)
-        best2[tri[first[has2]]] = eid[sec[has2]]
-        gz = np.r_[g, 0.0]                                   # gain of "no edge" = 0
-
-        def other(t):
-            b1, b2 = best1[t], best2[t]
-            return np.where(b1 == idx, gz[b2], gz[b1])
-        safe = idx[g[idx] >= other(f0[idx]) + other(f1[idx])]
-        if not len(safe):
-            break
-        bs = np.full(n_faces, k, dtype=np.int64)
-        np.minimum.at(bs, f0[safe], rank[safe])
-        np.minimum.at(bs, f1[safe], rank[safe])
-        take = safe[(bs[f0[safe]] == rank[safe]) & (bs[f1[safe]] == rank[safe])]
-        taken[take] = True
-        matched[f0[take]] = True
-        matched[f1[take]] = True
-        active &= ~(matched[f0] | matched[f1])
-    return taken, active
+    uv can be fixed to 1 and u, v removed.  In rounds (compiled:
+    :func:`~shellmesh_mdao.kernels.safe_matching_rounds`); within a round only safe edges
+    that are the best-ranked safe edge at both their triangles are taken, so they form a
+    matching.  Returns ``(taken, remaining)`` boolean masks over the edges."""
+    return safe_matching_rounds(f0, f1, w, n_faces, max_rounds)
 
 
 def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: float = 1.0,

@@ -307,3 +307,63 @@ def test_existing_quads_untouched_and_empty_mesh():
     empty = ShellMesh(np.zeros((0, 3)), np.zeros((0, 4), int))
     out, res = merge_triangles(empty)
     assert out.n_faces == 0 and res.n_merged == 0
+
+
+def _safe_reduction_numpy(f0, f1, w, n_faces, max_rounds=100):
+    """The reduction's vectorised numpy rounds, as merge._safe_reduction ran them before the
+    compiled kernel: the reference for its masks."""
+    k = len(w)
+    g = -w
+    rank = np.empty(k, dtype=np.int64)
+    rank[np.lexsort((np.arange(k), w))] = np.arange(k)
+    taken, active, matched = np.zeros(k, bool), np.ones(k, bool), np.zeros(n_faces, bool)
+    for _ in range(max_rounds):
+        idx = np.flatnonzero(active)
+        if not len(idx):
+            break
+        tri, eid = np.concatenate([f0[idx], f1[idx]]), np.concatenate([idx, idx])
+        o = np.lexsort((rank[eid], tri))
+        tri, eid = tri[o], eid[o]
+        first = np.flatnonzero(np.r_[True, tri[1:] != tri[:-1]])
+        best1 = np.full(n_faces, -1, dtype=np.int64)
+        best1[tri[first]] = eid[first]
+        sec = first + 1
+        has2 = sec < len(tri)
+        has2[has2] = tri[sec[has2]] == tri[first[has2]]
+        best2 = np.full(n_faces, -1, dtype=np.int64)
+        best2[tri[first[has2]]] = eid[sec[has2]]
+        gz = np.r_[g, 0.0]
+
+        def other(t):
+            return np.where(best1[t] == idx, gz[best2[t]], gz[best1[t]])
+        safe = idx[g[idx] >= other(f0[idx]) + other(f1[idx])]
+        if not len(safe):
+            break
+        bs = np.full(n_faces, k, dtype=np.int64)
+        np.minimum.at(bs, f0[safe], rank[safe])
+        np.minimum.at(bs, f1[safe], rank[safe])
+        take = safe[(bs[f0[safe]] == rank[safe]) & (bs[f1[safe]] == rank[safe])]
+        taken[take] = True
+        matched[f0[take]] = matched[f1[take]] = True
+        active &= ~(matched[f0] | matched[f1])
+    return taken, active
+
+
+def test_safe_reduction_rounds_match_the_numpy_rounds():
+    """The compiled rounds (kernels.safe_matching_rounds) give the numpy rounds' masks on
+    random graphs with repeated edges, tied weights (ranks then decide), isolated triangles
+    and round limits; edges out of range are refused."""
+    from shellmesh_mdao.kernels import safe_matching_rounds
+    rng = np.random.default_rng(6)
+    for trial in range(300):
+        n, k = int(rng.integers(2, 150)), int(rng.integers(1, 300))
+        f0, f1 = rng.integers(0, n, k), rng.integers(0, n, k)
+        f0, f1 = f0[f0 != f1], f1[f0 != f1]
+        w = -np.round(rng.random(len(f0)) * 4, int(rng.integers(0, 3)))
+        rounds = int(rng.integers(1, 6)) if trial % 3 == 0 else 100
+        ref = _safe_reduction_numpy(f0, f1, w, n, rounds)
+        got = safe_matching_rounds(f0, f1, w, n, rounds)
+        assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+        assert np.array_equal(_safe_reduction(f0, f1, w, n, rounds)[0], ref[0])
+    with pytest.raises(ValueError, match="f1 holds indices outside"):
+        safe_matching_rounds([0], [5], [-1.0], 3)
