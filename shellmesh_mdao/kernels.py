@@ -38,7 +38,8 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
            "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
            "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
-           "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests", "warm_up"]
+           "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests", "safe_matching_rounds",
+           "warm_up"]
 
 
 # ============================================================================ independent sets

@@ -419,6 +419,8 @@ class Supports:
         tri = np.full(len(x), -1, np.int64)
         if hint is not None:
             hint = np.asarray(hint, np.int64).reshape(-1)
+            if len(hint) != len(x):
+                raise ValueError(f"project_kind: hint needs one entry per point, got {len(hint)} for {len(x)}")
         pl = np.flatnonzero(kind == PLANE)
         if len(pl):
             p0 = self.planes[ref[pl], 0]

@@ -90,7 +90,8 @@ def test_derive_supports_kinds():
 def test_project_kind_hints_and_triangles():
     """project_kind(return_tri=True) also gives each SURFACE row's closest input triangle (the
     locator's, -1 on the other rows); handed back as ``hint`` for points moved a little it
-    changes nothing, bit for bit (the smoothing's line search does this every step)."""
+    changes nothing, bit for bit (the smoothing's line search does this every step); a hint of
+    the wrong length is refused."""
     mesh, loc, planes, curves = t_mesh()
     sup = derive_supports(mesh, loc, planes, curves, sliding=True)
     rng = np.random.default_rng(2)
@@ -107,6 +108,8 @@ def test_project_kind_hints_and_triangles():
         again = sup.project_kind(moved, sup.kind, sup.ref, nrm, hint=hint, return_tri=True)
         ref = sup.project_kind(moved, sup.kind, sup.ref, nrm, return_tri=True)
         assert all(np.array_equal(a, b) for a, b in zip(again, ref))
+    with pytest.raises(ValueError, match="one entry per point"):
+        sup.project_kind(moved, sup.kind, sup.ref, nrm, hint=tri[:-1])
 
 
 def test_chain_on_two_curves_slides_on_one():
