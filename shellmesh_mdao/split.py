@@ -299,6 +299,10 @@ def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, 
         raise SolverError("HiGHS rejected the optimisation model (internal error); "
                           "report this with the input mesh")
     if integer and start is not None:
+        # the start is the incumbent HiGHS's feasibility-jump heuristic would look for first;
+        # skipping it halves the merge's solve (0.13 -> 0.06 s on the target case, the same
+        # solution). HiGHS releases before the option ignore it (an error status, no change)
+        h.setOptionValue("mip_heuristic_run_feasibility_jump", False)
         sol = highspy.HighsSolution()
         sol.col_value = np.asarray(start, dtype=np.float64)
         sol.value_valid = True

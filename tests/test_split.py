@@ -356,3 +356,46 @@ def test_highs_solve_prints_nothing(capfd):
         assert res.status == "Optimal" and np.allclose(res.x, [1.0, 0.0])
     out, err = capfd.readouterr()
     assert out == "" and err == ""
+
+
+def test_highs_mip_with_start_skips_feasibility_jump_and_stays_optimal(monkeypatch):
+    """With a start solution the MIP turns HiGHS's feasibility-jump heuristic off (the start is
+    the incumbent it would look for; the merge's solve takes half the time) and HiGHS accepts
+    the option; from a poor start the solve still reaches the optimum found by enumeration."""
+    import itertools
+
+    import highspy
+    from scipy import sparse
+
+    from shellmesh_mdao import split as sp
+
+    set_calls = []
+    base = sp._highs_core(highspy)
+
+    class Recording(base):
+        def setOptionValue(self, name, value):
+            status = super().setOptionValue(name, value)
+            set_calls.append((name, value, status))
+            return status
+
+    monkeypatch.setattr(sp, "_highs_core", lambda hp: Recording)
+    # a weighted matching on a 6-cycle with a chord: one binary per edge, at most one chosen
+    # edge at each node; minimise the (negative) weights
+    edges = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (5, 0), (1, 4)]
+    w = -np.array([3.0, 1.0, 2.5, 1.0, 2.0, 1.5, 4.0])
+    rows = np.array([i for e in edges for i in e])
+    cols = np.repeat(np.arange(len(edges)), 2)
+    A = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(6, len(edges)))
+    start = np.zeros(len(edges))
+    start[1] = 1.0                                       # a feasible but poor matching
+    res = sp._highs_solve(w, A, np.full(6, -np.inf), np.ones(6), np.ones(len(edges)), integer=True,
+                          time_limit=10.0, mip_gap=0.0, start=start)
+    best = min(float(w @ np.array(x)) for x in itertools.product((0, 1), repeat=len(edges))
+               if (A @ np.array(x, float) <= 1).all())
+    assert res.status == "Optimal" and res.objective == pytest.approx(best)
+    jump = [c for c in set_calls if c[0] == "mip_heuristic_run_feasibility_jump"]
+    assert jump and jump[0][1] is False and jump[0][2] == highspy.HighsStatus.kOk
+    # without a start (the LP, or a MIP with nothing to start from) the option is left alone
+    set_calls.clear()
+    sp._highs_solve(w, A, np.full(6, -np.inf), np.ones(6), np.ones(len(edges)), integer=True, time_limit=10.0)
+    assert not [c for c in set_calls if c[0] == "mip_heuristic_run_feasibility_jump"]
