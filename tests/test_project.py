@@ -380,6 +380,10 @@ def test_closest_does_not_depend_on_threads_batches_or_order():
         assert np.array_equal(a, b)
     for a, b in zip(one, rev):
         assert np.array_equal(a, b[::-1])
+    # batches just at and above the smallest that two threads share
+    for k in (2 * bvh.MIN_BLOCK, 2 * bvh.MIN_BLOCK + 1, 3 * bvh.MIN_BLOCK - 1):
+        part = bvh.closest(q[-k:], threads=2)
+        assert np.array_equal(part[0], one[0][-k:]) and np.array_equal(part[1], one[1][-k:])
     single = [bvh.closest(q[i:i + 1]) for i in range(0, len(q), 97)]
     assert np.array_equal(np.vstack([s[0] for s in single]), one[0][::97])
     assert np.array_equal(np.concatenate([s[1] for s in single]), one[1][::97])
