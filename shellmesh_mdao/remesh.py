@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, SizeError
 from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup, edge_rows,
                       edge_table, facing_ok, flip_candidates, greedy_independent, greedy_independent_rings, move_tests,
-                      stable_order, triangle_normals)
+                      rank_desc, stable_order, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -124,11 +124,9 @@ def _rank(prio, tiebreak):
     ``tiebreak`` (scrambled so that equal priorities do not form spatially ordered chains,
     which would make the independent sets small)."""
     # the hash is a bijection of ids below its prime modulus, so it breaks every tie by itself
-    # (the ids as a third key never decided anything)
-    order = np.lexsort((_hash(tiebreak), -np.asarray(prio)))
-    r = np.empty(len(prio), dtype=np.int64)
-    r[order] = np.arange(len(prio), 0, -1)
-    return r
+    # (the ids as a third key never decided anything); the ranks of
+    # np.lexsort((_hash(tiebreak), -prio)), by a compiled radix sort
+    return rank_desc(prio, _hash(tiebreak))
 
 
 # ============================================================================ topology

@@ -425,6 +425,48 @@ def test_counting_sorts_give_numpy_stable_argsort(seed):
     assert np.array_equal(stable_order([2, 0, 2, 1, 0], 3), [1, 4, 3, 0, 2])
 
 
+
+def _lexsort_ranks(prio, tie):
+    """The ranks remesh._rank took from numpy before the radix sort."""
+    order = np.lexsort((tie, -np.asarray(prio)))
+    r = np.empty(len(prio), np.int64)
+    r[order] = np.arange(len(prio), 0, -1)
+    return r
+
+
+@pytest.mark.parametrize("kind", range(5))
+def test_rank_desc_gives_the_lexsort_ranks(kind):
+    """Radix ranks against np.lexsort((tie, -prio)): normal floats, few distinct values (ties
+    broken by the key), infinities and both zeros, subnormals, exponents across the whole
+    range; the remesh's hashed ids and full 64-bit keys."""
+    from shellmesh_mdao.kernels import rank_desc
+    from shellmesh_mdao.remesh import _hash
+    rng = np.random.default_rng(900 + kind)
+    for _ in range(40):
+        n = int(rng.integers(0, 3000))
+        if kind == 0:
+            prio = rng.normal(size=n)
+        elif kind == 1:
+            prio = np.round(rng.random(n), 1)
+        elif kind == 2:
+            prio = rng.choice([-np.inf, np.inf, 0.0, -0.0, 1.0, -1.0, 5e-324, -5e-324, 1e308], n)
+        elif kind == 3:
+            prio = -rng.random(n) * 1e-300
+        else:
+            prio = rng.integers(-3, 3, n).astype(float) * 2.0 ** rng.integers(-1074, 1000, n)
+        if kind < 4:
+            tie = _hash(rng.choice(10 * n + 10, n, replace=False))
+        else:
+            tie = np.unique(rng.integers(0, 2 ** 63, n, dtype=np.uint64) * np.uint64(2)
+                            + rng.integers(0, 2, n, dtype=np.uint64))
+            rng.shuffle(tie)
+            prio = prio[:len(tie)]
+        assert np.array_equal(rank_desc(prio, tie), _lexsort_ranks(prio, tie))
+    with pytest.raises(ValueError, match="NaN"):
+        rank_desc([1.0, np.nan], np.array([0, 1], np.uint64))
+    with pytest.raises(ValueError, match="same length"):
+        rank_desc([1.0, 2.0], np.array([0], np.uint64))
+
 def _triangles_reference(p, a, b, c):
     """The whole-array version the kernel replaced (project.closest_point_on_triangles before it)."""
     p, a, b, c = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (p, a, b, c)))
