@@ -35,7 +35,8 @@ from numba import njit
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
-           "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order", "rank_desc",
+           "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
+           "group_order", "edge_neighbours", "rank_desc",
            "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
            "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
            "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests", "safe_matching_rounds",
@@ -1244,6 +1245,63 @@ def stable_order(keys, n):
     keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
     _check_index("keys", keys, int(n))
     return _counting_order(keys, int(n), np.arange(len(keys)))
+
+
+@njit(cache=True, nogil=True)
+def _group_order(keys, n):
+    ptr = np.zeros(n + 1, np.int64)
+    for i in range(keys.shape[0]):
+        ptr[keys[i] + 1] += 1
+    for k in range(n):
+        ptr[k + 1] += ptr[k]
+    fill = ptr[:n].copy()
+    order = np.empty(keys.shape[0], np.int64)
+    for i in range(keys.shape[0]):
+        k = keys[i]
+        order[fill[k]] = i
+        fill[k] += 1
+    return ptr, order
+
+
+def group_order(keys, n):
+    """Row pointers ``ptr`` (n + 1,) and ``order`` grouping ``arange(len(keys))`` by ``keys``
+    (integers in [0, n)): ``order`` is ``np.argsort(keys, kind="stable")`` and group ``k`` is
+    ``order[ptr[k]:ptr[k + 1]]``, in one counting pass."""
+    keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
+    _check_index("keys", keys, int(n))
+    return _group_order(keys, int(n))
+
+
+@njit(cache=True, nogil=True)
+def _edge_neighbours(E, n):
+    ne = E.shape[0]
+    ptr = np.zeros(n + 1, np.int64)
+    for i in range(ne):
+        ptr[E[i, 0] + 1] += 1
+        ptr[E[i, 1] + 1] += 1
+    for k in range(n):
+        ptr[k + 1] += ptr[k]
+    fill = ptr[:n].copy()
+    nbr = np.empty(2 * ne, np.int64)
+    for i in range(ne):                     # first each vertex's edges as their first end ...
+        a = E[i, 0]
+        nbr[fill[a]] = E[i, 1]
+        fill[a] += 1
+    for i in range(ne):                     # ... then as their second, each in edge order
+        b = E[i, 1]
+        nbr[fill[b]] = E[i, 0]
+        fill[b] += 1
+    return ptr, nbr
+
+
+def edge_neighbours(E, n):
+    """CSR ``(ptr, nbr)`` of the vertices next to each vertex along the edges ``E`` (e, 2) on
+    ``n`` vertices: for vertex v, the other ends of the edges whose first end is v (in edge
+    order), then of those whose second end is v (the grouping of
+    ``concatenate([E[:, 1], E[:, 0]])`` by ``concatenate([E[:, 0], E[:, 1]])``, stable)."""
+    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
+    _check_index("E", E, int(n))
+    return _edge_neighbours(E, int(n))
 
 
 def stable_pair_order(lo, hi, n):
@@ -2904,6 +2962,8 @@ def warm_up() -> float:
     stable_order(np.array([1, 0, 1]), 2)
     stable_pair_order(np.array([1, 0]), np.array([0, 1]), 2)
     rank_desc(np.array([1.0, 0.0]), np.array([3, 2], np.uint64))
+    group_order(np.array([1, 0, 1]), 2)
+    edge_neighbours(np.array([[0, 1]]), 2)
     closest_on_triangles(np.ones((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.eye(3)[1:2])
     TriangleBVH(np.eye(3), np.array([[0, 1, 2]])).closest(np.ones((1, 3)))
     _in_range(np.zeros(1, np.int64), 1)

@@ -38,9 +38,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup, edge_rows,
-                      edge_table, facing_ok, flip_candidates, greedy_independent, greedy_independent_rings, move_tests,
-                      rank_desc, stable_order, triangle_normals)
+from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup,
+                      edge_neighbours, edge_rows, edge_table, facing_ok, flip_candidates, greedy_independent,
+                      greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -98,10 +98,7 @@ def _tri_angles(P, F):
 
 def _csr(keys, n):
     """Order and row pointers grouping ``arange(len(keys))`` by ``keys`` in [0, n)."""
-    order = stable_order(keys, n)
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
-    return ptr, order
+    return group_order(keys, n)
 
 
 def _expand(ptr, rows):
@@ -166,10 +163,7 @@ class _Topo:
     def vertex_neighbors(self):
         """CSR (ptr, nbr) of vertex neighbours."""
         if self._vn is None:
-            src = np.concatenate([self.E[:, 0], self.E[:, 1]])
-            dst = np.concatenate([self.E[:, 1], self.E[:, 0]])
-            ptr, order = _csr(src, self.n)
-            self._vn = (ptr, dst[order])
+            self._vn = edge_neighbours(self.E, self.n)
         return self._vn
 
     def vertex_faces(self, F):

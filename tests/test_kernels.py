@@ -423,6 +423,18 @@ def test_counting_sorts_give_numpy_stable_argsort(seed):
     assert np.array_equal(stable_order(k, n), np.argsort(k, kind="stable"))
     assert np.array_equal(stable_pair_order(lo, hi, n), np.argsort(lo * n + hi, kind="stable"))
     assert np.array_equal(stable_order([2, 0, 2, 1, 0], 3), [1, 4, 3, 0, 2])
+    # grouping with row pointers, and vertex neighbours along edges: the numpy constructions
+    # the remesh used before them
+    from shellmesh_mdao.kernels import edge_neighbours, group_order
+    ptr, order = group_order(k, n)
+    assert np.array_equal(order, np.argsort(k, kind="stable"))
+    assert np.array_equal(ptr, np.concatenate([[0], np.cumsum(np.bincount(k, minlength=n))]))
+    E = np.stack([lo, hi], 1)
+    src = np.concatenate([E[:, 0], E[:, 1]])
+    dst = np.concatenate([E[:, 1], E[:, 0]])
+    vptr, nbr = edge_neighbours(E, n)
+    assert np.array_equal(nbr, dst[np.argsort(src, kind="stable")])
+    assert np.array_equal(vptr, np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))]))
 
 
 
