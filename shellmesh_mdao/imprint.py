@@ -1365,7 +1365,7 @@ def _flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0, active=None
     return T, len(take)
 
 
-def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, chain_nb=None):
+def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, chain_nb=None, hint=None):
     """Move each movable vertex towards the area-weighted centroid of its star (tangential,
     then onto the input surface); chain vertices (``chain_of[v] >= 0``) move the same way,
     projected onto their exact arc. A move is kept only if it raises the smallest angle of
@@ -1373,7 +1373,10 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     next vertex along its chain, -1 for none) keeps the vertex between its chain neighbours
     along the arc: where the skin is thinner than its faces the closest arc point can be on
     the far side of the section, and the chain would run back and forth there (a spike).
-    Moves are applied on an independent set (no two moved vertices share a triangle)."""
+    Moves are applied on an independent set (no two moved vertices share a triangle).
+    ``hint`` (n,): an input triangle near each vertex (-1: none) for the projections, updated in
+    place with the triangles they found (a hint saves a part of the search; the answers are
+    the same)."""
     n = len(P)
     ptr, star = vertex_faces(T, n)
     a, b, c = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
@@ -1401,7 +1404,9 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     new[cand] = P[cand] + step * mv
     surf = cand if chain_of is None else cand[chain_of[cand] < 0]
     if len(surf):
-        new[surf] = locator.closest(new[surf])[0]
+        new[surf], tri, _ = locator.closest(new[surf], hint=None if hint is None else hint[surf])
+        if hint is not None:
+            hint[surf] = tri
     if chain_of is not None:
         vv = cand[chain_of[cand] >= 0]
         if len(vv):
@@ -1564,10 +1569,11 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
                 active[T[_face_rings(T, ptr, vf, seed, r)]] = True
         movable &= active
     chain_nb = _chain_neighbours(len(P), chain_vs, arcs)
+    hint = np.full(len(P), -1, np.int64)            # each vertex's input triangle, once projected
     with np.errstate(invalid="ignore"):
         for _ in range(rounds):
             T, nf = _flip_round(P, T, fe, min_gain=min_gain, active=active)
-            P, nm = _smooth_round(P, T, movable, locator, chain_of, arcs, chain_nb=chain_nb)
+            P, nm = _smooth_round(P, T, movable, locator, chain_of, arcs, chain_nb=chain_nb, hint=hint)
             if nf == 0 and nm == 0:
                 break
     C = mesh.component

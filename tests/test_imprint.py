@@ -520,3 +520,30 @@ def test_segment_hits_scan_and_kd_tree_agree(seed, monkeypatch):
     assert len(got[0]) > 90
     for x, y in zip(got, ref):
         assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
+
+
+def test_smooth_round_hint_gives_the_same_moves_and_records_the_triangles():
+    """improve_skin's smoothing rounds pass each vertex's input triangle from the last round as a
+    hint to the projections: the same moves as without one, and the hint then holds the
+    triangle each projected vertex landed on."""
+    from shellmesh_mdao.imprint import _smooth_round
+    from shellmesh_mdao.project import SurfaceLocator
+
+    m = naca_wing(n_chord=30, n_span=25)
+    loc = SurfaceLocator(m.points, m.faces[:, :3])
+    P = m.points.copy()
+    T = m.faces[:, :3]
+    rng = np.random.default_rng(3)
+    movable = rng.random(len(P)) < 0.7
+    movable[m.fixed_vertices] = False
+    hint = np.full(len(P), -1, np.int64)
+    for _ in range(3):
+        with np.errstate(invalid="ignore"):              # as improve_skin runs it
+            plain, n_plain = _smooth_round(P, T, movable, loc)
+            hinted, n_hinted = _smooth_round(P, T, movable, loc, hint=hint)
+        assert n_plain == n_hinted > 0 and np.array_equal(plain, hinted)
+        moved = np.flatnonzero((hinted != P).any(1))
+        assert len(moved) and (hint[moved] >= 0).all()
+        _, tri, _ = loc.closest(hinted[moved])
+        assert np.array_equal(tri, hint[moved])
+        P = hinted
