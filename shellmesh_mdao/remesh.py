@@ -791,6 +791,9 @@ class _Work:
         return len(self.P)
 
     def set_features(self, fe, fe_chain):
+        """The feature edges ``fe`` (k, 2) with their chain ids: each row as (lo, hi), rows
+        with lo == hi dropped, sorted by (lo, hi, chain), one row per node pair (the lowest
+        chain id)."""
         fe = np.sort(np.asarray(fe, dtype=np.int64).reshape(-1, 2), axis=1)
         fe_chain = np.asarray(fe_chain, dtype=np.int64).reshape(-1)
         keep = fe[:, 0] != fe[:, 1]
@@ -849,7 +852,10 @@ class _Work:
         self.F = o2n[self.F]
         fe = self.fe
         ok = keep[fe[:, 0]] & keep[fe[:, 1]] if len(fe) else np.zeros(0, bool)
-        self.set_features(o2n[fe[ok]], self.fe_chain[ok])
+        # fe is as set_features leaves it (rows lo < hi, sorted, unique) and o2n is increasing
+        # on the kept vertices: the renumbered kept rows are too, in the same order
+        self.fe = o2n[fe[ok]]
+        self.fe_chain = self.fe_chain[ok]
         self.touched()
         return o2n
 

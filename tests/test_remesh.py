@@ -361,3 +361,26 @@ def test_improve_triangles_leaves_quads_alone():
     assert np.array_equal(out.faces[-1], quad[0])
     assert np.array_equal(out.points[quad[0]], Q[quad[0]])
     assert np.array_equal(out.component, m.component)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_subset_vertices_keeps_the_feature_table_canonical(seed):
+    """Dropping vertices renumbers the feature edges without sorting them again: the same table
+    as set_features of the renumbered kept rows (sorted (lo, hi, chain) rows, one per pair)."""
+    from shellmesh_mdao.remesh import _Work
+    rng = np.random.default_rng(40 + seed)
+    n = 60
+    fe = rng.integers(0, n, (150, 2))                    # repeats, reversed and degenerate rows
+    ch = rng.integers(-1, 5, 150)
+    W = _Work(rng.random((n, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(n, np.int64),
+              np.zeros(n), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), fe, ch, np.ones(n))
+    assert (W.fe[:, 0] < W.fe[:, 1]).all() and len(W.fe) < 150
+    keep = rng.random(n) < 0.7
+    o2n = np.cumsum(keep) - 1
+    ok = keep[W.fe[:, 0]] & keep[W.fe[:, 1]]
+    ref = _Work(rng.random((n, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(n, np.int64),
+                np.zeros(n), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
+                o2n[W.fe[ok]], W.fe_chain[ok], np.ones(n))
+    W.subset_vertices(keep)
+    assert W.n == keep.sum()
+    assert np.array_equal(W.fe, ref.fe) and np.array_equal(W.fe_chain, ref.fe_chain)
