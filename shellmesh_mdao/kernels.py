@@ -39,7 +39,8 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "group_order", "edge_neighbours", "rank_desc",
            "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
            "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
-           "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests", "safe_matching_rounds",
+           "collapse_directions", "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests",
+           "safe_matching_rounds",
            "warm_up"]
 
 
@@ -2355,6 +2356,82 @@ def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr
     return out_a[:na], out_b[:na]
 
 
+@njit(cache=True, nogil=True)
+def _collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, rf, use_rf):
+    n = nptr.shape[0] - 1
+    k = cand.shape[0]
+    boundary = np.zeros(n, np.bool_)
+    for e in range(E.shape[0]):
+        if valence[e] == 1:
+            boundary[E[e, 0]] = True
+            boundary[E[e, 1]] = True
+    u = np.empty(k, np.int64)
+    v = np.empty(k, np.int64)
+    for i in range(k):
+        u[i], v[i] = E[cand[i], 0], E[cand[i], 1]
+    common = _common(nptr, nbr, u, v, n)
+    ok = np.zeros(k, np.bool_)
+    dir_ok = np.zeros((k, 2), np.bool_)
+    for i in range(k):
+        e = cand[i]
+        a0 = h0[e]
+        o0 = F[a0 // 3, (a0 % 3 + 2) % 3]
+        good = nptr[o0 + 1] - nptr[o0] > 3
+        a1 = h1[e]
+        if a1 >= 0:
+            o1 = F[a1 // 3, (a1 % 3 + 2) % 3]
+            good = good and nptr[o1 + 1] - nptr[o1] > 3
+        good = good and common[i] == valence[e]
+        good = good and not (valence[e] == 2 and boundary[u[i]] and boundary[v[i]])
+        ok[i] = good
+        for d in range(2):
+            a = u[i] if d == 0 else v[i]
+            b = v[i] if d == 0 else u[i]
+            da = good and (kind[a] == 0 or (kind[a] == 1 and isf[e] and chain_ok[a]))
+            if use_rf:
+                da = da or (good and rf[a] and kind[a] == 2 and isf[e])
+                da = da and not (rf[b] and not rf[a])
+            dir_ok[i, d] = da
+    return ok, dir_ok
+
+
+def collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, remove_first=None):
+    """The remesh's cheap collapse tests of the candidate edges ``cand`` of the edge table
+    ``E`` (``h0``, ``h1``, ``valence`` per edge, as :func:`edge_table` gives them) of the
+    triangles ``F``, with vertex neighbours ``nptr``/``nbr``: ``ok`` (k,) where both opposite
+    vertices keep more than three neighbours, the ends share exactly the edge's faces' apexes
+    as common neighbours (the link condition) and an interior edge does not join two
+    boundary vertices; ``dir_ok`` (k, 2) where the collapse may remove u (into v), v (into u):
+    ``ok`` and the removed vertex regular (kind 0), or on a chain (kind 1) along a feature
+    edge (``isf`` per edge) with ``chain_ok`` (its chain keeps enough vertices). With
+    ``remove_first`` (vertex ids): those vertices may also go when they are corners (kind 2)
+    along a feature edge, and an edge at one of them may only remove it. The numpy tests of
+    ``remesh._collapse_edges`` in one compiled pass (the same masks)."""
+    i64 = lambda x: np.ascontiguousarray(x, dtype=np.int64)     # noqa: E731
+    E = i64(E).reshape(-1, 2)
+    F = i64(F).reshape(-1, 3)
+    cand, h0, h1, valence, nptr, nbr, kind = (i64(x).reshape(-1) for x in (cand, h0, h1, valence, nptr, nbr, kind))
+    isf = np.ascontiguousarray(isf, dtype=np.bool_).reshape(-1)
+    chain_ok = np.ascontiguousarray(chain_ok, dtype=np.bool_).reshape(-1)
+    n = len(nptr) - 1
+    if not len(h0) == len(h1) == len(valence) == len(isf) == len(E) or len(kind) != n or len(chain_ok) != n:
+        raise ValueError("collapse_directions: arrays of mismatched lengths")
+    _check_csr(nptr, nbr)
+    _check_index("E", E, n)
+    _check_index("F", F, n)
+    _check_index("cand", cand, len(E))
+    _check_index("h0", h0, 3 * len(F))
+    if len(h1) and (h1.max(initial=-1) >= 3 * len(F) or h1.min(initial=0) < -1):
+        raise ValueError(f"collapse_directions: h1 must be -1 or below {3 * len(F)}")
+    rf = np.zeros(n if remove_first is not None else 0, np.bool_)
+    if remove_first is not None:
+        remove_first = i64(remove_first).reshape(-1)
+        _check_index("remove_first", remove_first, n)
+        rf[remove_first] = True
+    return _collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, rf,
+                                remove_first is not None and len(remove_first) > 0)
+
+
 def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, vtri, tri_n, cos_facing,
                     max_len_ratio=np.inf, fn_old=None, cos_turn=-1.0, surface=None, max_sub=16):
     """The remesh's batch of edge collapses: :func:`greedy_independent_rings` over the
@@ -2995,6 +3072,10 @@ def warm_up() -> float:
                         np.zeros(2, np.int64), np.vstack([e, [1.0, -1.0, 0.0]]), 0.5, np.zeros(4, np.int64),
                         np.zeros(4, np.int64), e, 0.2, dg, dg)
     _, h0, h1, cnt, E, _ = edge_table(Fq, 4)
+    nptr4, nbr4 = edge_neighbours(E, 4)
+    for rf in (None, [3]):
+        collapse_directions(E, [0, 1], h0, h1, cnt, Fq, nptr4, nbr4, np.zeros(4, np.int64), np.zeros(5, bool),
+                            np.ones(4, bool), remove_first=rf)
     skin_flips(E, np.array([0, 3, 5, 5, 5]), h0, h1, cnt, np.zeros(5, bool), Fq, np.vstack([e, [1.0, -1.0, 0.0]]),
                0.5)
     move_tests(e, np.array([[0, 1, 2]]), e[2:], np.ones(1), np.array([True, False, False]), np.zeros(3, np.int64),

@@ -38,9 +38,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (collapse_select, common_neighbour_counts, corner_sin_cos, edge_lengths, edge_lookup,
-                      edge_neighbours, edge_rows, edge_table, facing_ok, flip_candidates, greedy_independent,
-                      greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals)
+from .kernels import (collapse_directions, collapse_select, corner_sin_cos, edge_lengths, edge_lookup, edge_neighbours,
+                      edge_rows, edge_table, facing_ok, flip_candidates, greedy_independent, greedy_independent_rings,
+                      group_order, move_tests, rank_desc, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -1190,8 +1190,6 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
     isf, _ = W.feature_lookup(T)
     nptr, nbr = T.vertex_neighbors()
     fptr, vf = T.vertex_faces(F)
-    deg = np.diff(nptr)
-    ncand = len(cand)
     # chain vertex counts (a closed chain keeps >= 3 vertices, a chain through one corner >= 2)
     chain_ok_v = np.ones(n, bool)
     if ctx.surf is not None and ctx.surf.n_chains:
@@ -1200,29 +1198,12 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
         need = np.where(s.ch_closed, 3, np.where(s.ch_first_v == s.ch_last_v, 2, 0))
         cv = W.kind == _CHAIN
         chain_ok_v[cv] = cnt[W.vchain[cv]] > need[W.vchain[cv]]
-    # ---- cheap tests: opposite valences, link condition, no pinching, vertex kinds
-    h0, h1 = T.h0[cand], T.h1[cand]
-    opp0 = F[h0 // 3, (h0 % 3 + 2) % 3]
-    opp1 = np.where(h1 >= 0, F[np.maximum(h1, 0) // 3, (np.maximum(h1, 0) % 3 + 2) % 3], -1)
+    # ---- cheap tests: opposite valences, link condition, no pinching, vertex kinds (dangling
+    #      feature-line ends listed in remove_first may go along their line; an edge at a
+    #      vertex to be removed may only remove that vertex), in one compiled pass
     u, v = E[cand, 0], E[cand, 1]
-    ok = (deg[opp0] > 3) & ((opp1 < 0) | (deg[np.maximum(opp1, 0)] > 3))
-    ok &= common_neighbour_counts(nptr, nbr, u, v) == T.valence[cand]
-    boundary_v = np.zeros(n, bool)
-    boundary_v[E[T.valence == 1].reshape(-1)] = True
-    ok &= ~((T.valence[cand] == 2) & boundary_v[u] & boundary_v[v])
-    dir_ok = np.zeros((ncand, 2), bool)
-    for dirn, a in ((0, u), (1, v)):
-        ka = W.kind[a]
-        dir_ok[:, dirn] = ok & ((ka == _REGULAR) | ((ka == _CHAIN) & isf[cand] & chain_ok_v[a]))
-    if remove_first is not None and len(remove_first):
-        rf = np.zeros(n, bool)
-        rf[remove_first] = True
-        # dangling feature-line ends listed here may go along their line
-        for dirn, a in ((0, u), (1, v)):
-            dir_ok[:, dirn] |= ok & rf[a] & (W.kind[a] == _CORNER) & isf[cand]
-        # an edge at a vertex to be removed may only remove that vertex
-        dir_ok[:, 0] &= ~(rf[v] & ~rf[u])
-        dir_ok[:, 1] &= ~(rf[u] & ~rf[v])
+    _, dir_ok = collapse_directions(E, cand, T.h0, T.h1, T.valence, F, nptr, nbr, W.kind, isf, chain_ok_v,
+                                     remove_first=remove_first)
     alive = dir_ok[:, 0] | dir_ok[:, 1]
     if not alive.any():
         return 0

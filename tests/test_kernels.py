@@ -1326,3 +1326,55 @@ def test_index_checks_match_numpys_min_and_max():
                 with pytest.raises(ValueError, match=rf"x holds indices outside \[0, {n}\): {a.min()}\.\.{a.max()}"):
                     _check_index("x", arr, n)
     _check_index("x", np.zeros(0, np.int64), 0)
+
+
+def _collapse_directions_numpy(E, cand, h0all, h1all, valence, F, nptr, nbr, kind, isf, chain_ok, remove_first):
+    """remesh._collapse_edges' numpy cheap tests before kernels.collapse_directions."""
+    from shellmesh_mdao.kernels import common_neighbour_counts
+    n = len(nptr) - 1
+    deg = np.diff(nptr)
+    h0, h1 = h0all[cand], h1all[cand]
+    opp0 = F[h0 // 3, (h0 % 3 + 2) % 3]
+    opp1 = np.where(h1 >= 0, F[np.maximum(h1, 0) // 3, (np.maximum(h1, 0) % 3 + 2) % 3], -1)
+    u, v = E[cand, 0], E[cand, 1]
+    ok = (deg[opp0] > 3) & ((opp1 < 0) | (deg[np.maximum(opp1, 0)] > 3))
+    ok &= common_neighbour_counts(nptr, nbr, u, v) == valence[cand]
+    boundary_v = np.zeros(n, bool)
+    boundary_v[E[valence == 1].reshape(-1)] = True
+    ok &= ~((valence[cand] == 2) & boundary_v[u] & boundary_v[v])
+    dir_ok = np.zeros((len(cand), 2), bool)
+    for dirn, a in ((0, u), (1, v)):
+        ka = kind[a]
+        dir_ok[:, dirn] = ok & ((ka == 0) | ((ka == 1) & isf[cand] & chain_ok[a]))
+    if remove_first is not None and len(remove_first):
+        rf = np.zeros(n, bool)
+        rf[remove_first] = True
+        for dirn, a in ((0, u), (1, v)):
+            dir_ok[:, dirn] |= ok & rf[a] & (kind[a] == 2) & isf[cand]
+        dir_ok[:, 0] &= ~(rf[v] & ~rf[u])
+        dir_ok[:, 1] &= ~(rf[u] & ~rf[v])
+    return ok, dir_ok
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_collapse_directions_give_the_numpy_masks(seed):
+    """The remesh's cheap collapse tests in one compiled pass against the numpy tests they
+    replaced, on Delaunay meshes with open boundaries, random vertex kinds, feature edges,
+    chain counts and vertices to remove first."""
+    from scipy.spatial import Delaunay
+
+    from shellmesh_mdao.kernels import collapse_directions, edge_neighbours, edge_table
+    rng = np.random.default_rng(70 + seed)
+    n = int(rng.integers(20, 300))
+    F = Delaunay(rng.random((n, 2))).simplices.astype(np.int64)
+    _, h0, h1, valence, E, _ = edge_table(F, n)
+    nptr, nbr = edge_neighbours(E, n)
+    kind = rng.integers(0, 3, n)
+    isf = rng.random(len(E)) < 0.3
+    chain_ok = rng.random(n) < 0.7
+    cand = np.sort(rng.choice(len(E), int(rng.integers(1, len(E))), replace=False))
+    for rf in (None, np.zeros(0, np.int64), rng.choice(n, 8, replace=False)):
+        ok, dir_ok = collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, remove_first=rf)
+        ok_ref, dir_ref = _collapse_directions_numpy(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, rf)
+        assert np.array_equal(ok, ok_ref) and np.array_equal(dir_ok, dir_ref)
+        assert ok.any() and (~ok).any() and dir_ok.any()
