@@ -30,13 +30,12 @@ falling back to the guarded positions only where that repair fails.
 from __future__ import annotations
 
 import numpy as np
-import qdldl
 from scipy import sparse
 
 from .errors import MeshValidationError
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .quality import element_quality
-from .smooth import (CURVE, FIXED, SURFACE, Supports, _draped_vertices, _face_normals, _face_quality, _face_rings,
+from .smooth import (CURVE, FIXED, SURFACE, Supports, _LDL, _draped_vertices, _face_normals, _face_quality, _face_rings,
                      _min_corner_sj, _support_normals, untangle)
 
 __all__ = ["subdivide_to_quads", "subdivide_faces", "settle_off_surface", "planarize"]
@@ -323,29 +322,6 @@ def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6
 
 
 _TWIST = np.array([1.0, -1.0, 1.0, -1.0])
-
-
-class _LDL:
-    """Sparse LDL^T factorisations (qdldl: AMD ordering, no pivoting) of symmetric positive
-    definite matrices that share one sparsity pattern: the ordering and the symbolic
-    factorisation are made for the first matrix and kept while the pattern repeats, only
-    the numeric factorisation is redone. Same matrix, same bits."""
-
-    def __init__(self):
-        self.pattern = None
-        self.solver = None
-
-    def factor(self, indptr, indices, data):
-        """Factorise the matrix whose UPPER triangle is the CSC ``(data, indices, indptr)``."""
-        n = len(indptr) - 1
-        U = sparse.csc_matrix((data, indices, indptr), shape=(n, n))
-        if (self.pattern is not None and np.array_equal(self.pattern[0], indptr)
-                and np.array_equal(self.pattern[1], indices)):
-            self.solver.update(U, upper=True)
-        else:
-            self.solver = qdldl.Solver(U, upper=True)
-            self.pattern = (indptr.copy(), indices.copy())
-        return self.solver
 
 
 def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50, start=None, ldl: _LDL | None = None):

@@ -904,15 +904,40 @@ def _nearest_other(P, verts):
     return dn[:, 1]
 
 
+class _LDL:
+    """Sparse LDL^T factorisations (qdldl: AMD ordering, no pivoting) of symmetric positive
+    definite matrices that share one sparsity pattern: the ordering and the symbolic
+    factorisation are made for the first matrix and kept while the pattern repeats, only
+    the numeric factorisation is redone. Same matrix, same bits."""
+
+    def __init__(self):
+        self.pattern = None
+        self.solver = None
+
+    def factor(self, indptr, indices, data):
+        """Factorise the matrix whose UPPER triangle is the CSC ``(data, indices, indptr)``."""
+        n = len(indptr) - 1
+        U = sparse.csc_matrix((data, indices, indptr), shape=(n, n))
+        if (self.pattern is not None and np.array_equal(self.pattern[0], indptr)
+                and np.array_equal(self.pattern[1], indices)):
+            self.solver.update(U, upper=True)
+        else:
+            self.solver = qdldl.Solver(U, upper=True)
+            self.pattern = (indptr.copy(), indices.copy())
+        return self.solver
+
+
 class _Linear:
     """Solver of the reduced system H u = b (H symmetric positive definite, symmetric bit for
     bit): a sparse LDL^T factorisation (qdldl, AMD ordering; made once, reused for every
-    right-hand side) or Jacobi-preconditioned conjugate gradients on the same matrix."""
+    right-hand side; with ``ldl`` an :class:`_LDL` kept across the matrices of one pattern,
+    the ordering too) or Jacobi-preconditioned conjugate gradients on the same matrix."""
 
-    def __init__(self, H, method: str):
+    def __init__(self, H, method: str, ldl: _LDL | None = None):
         self.method = method
         if method == "lu":
-            self.lu = qdldl.Solver(sparse.triu(H, format="csc"), upper=True)
+            U = sparse.triu(H, format="csc")
+            self.lu = (_LDL() if ldl is None else ldl).factor(U.indptr, U.indices, U.data)
         else:
             self.H = H.tocsr()
             d = self.H.diagonal()
@@ -1211,6 +1236,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     # each vertex's closest input triangle at its last projection: where the next query starts
     hint = np.full(n, -1, np.int64)
     lin = T = nrm = ortho = warpt = hess = None
+    ldl = _LDL()                     # the refreshed matrices share one pattern: one ordering
     it = 0
     for it in range(1, iterations + 1):
         if not len(movable):
@@ -1258,7 +1284,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                 H = hess.matrix(hess.values(tv, pw, rho_v[owner], ortho=None if ortho is None else ortho.terms(),
                                             fo=ortho_weight,
                                             warp=None if warpt is None else warpt.terms(), fw=warp_weight))
-                lin = _Linear(H, method)
+                lin = _Linear(H, method, ldl)
             nfact += 1
         # gradient of the energy at D = 0 (homogeneous quadratic: K3 x, plus rest vectors)
         xc = P - P.mean(0)

@@ -714,3 +714,34 @@ def test_trust_radius_query_in_its_own_thread():
     assert job.result() is got                             # asked twice, one value
     with pytest.raises(IndexError):
         _Background(_nearest_other, P, np.array([400])).result()
+
+
+def test_ldl_reuses_the_ordering_with_the_same_bits():
+    """_LDL keeps qdldl's ordering and symbolic factorisation while the pattern repeats (the
+    smoothing's refreshed matrices, planarize's rounds): each solve has the bits of a fresh
+    factorisation of that matrix, and a new pattern gets a fresh one."""
+    import qdldl
+    from scipy import sparse
+
+    from shellmesh_mdao.smooth import _LDL, _Linear
+    rng = np.random.default_rng(8)
+    n = 400
+    A = sparse.random(n, n, density=0.02, random_state=3, format="csr")
+    pattern = (A + A.T + sparse.eye(n)).tocsr()
+    ldl = _LDL()
+    b = rng.normal(size=n)
+    solvers = []
+    for k in range(3):
+        M = pattern.copy()
+        M.data = rng.random(len(M.data))
+        M = ((M + M.T) * 0.5 + sparse.eye(n) * n).tocsr()          # SPD, symmetric bit for bit
+        U = sparse.triu(M, format="csc")
+        s = ldl.factor(U.indptr, U.indices, U.data)
+        solvers.append(s)
+        fresh = qdldl.Solver(U, upper=True)
+        assert np.array_equal(s.solve(b), fresh.solve(b))
+        lin = _Linear(M, "lu", ldl)
+        assert np.array_equal(lin.solve(b), _Linear(M, "lu").solve(b))
+    assert solvers[0] is solvers[1] is solvers[2]                     # one ordering for the pattern
+    other = sparse.triu((sparse.eye(n) * 2.0).tocsr(), format="csc")
+    assert ldl.factor(other.indptr, other.indices, other.data) is not solvers[0]
