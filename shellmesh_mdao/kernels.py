@@ -39,8 +39,8 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "group_order", "edge_neighbours", "rank_desc",
            "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
            "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
-           "collapse_directions", "collapse_select", "flip_candidates", "skin_flips", "star_moves", "move_tests",
-           "safe_matching_rounds",
+           "collapse_directions", "collapse_apply", "collapse_select", "flip_candidates", "skin_flips", "star_moves",
+           "move_tests", "safe_matching_rounds",
            "warm_up"]
 
 
@@ -2432,6 +2432,101 @@ def collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain
                                 remove_first is not None and len(remove_first) > 0)
 
 
+@njit(cache=True, nogil=True)
+def _collapse_apply(F, fpatch, fe, fe_chain, a, b, n):
+    remap = np.arange(n)
+    keepv = np.ones(n, np.bool_)
+    for i in range(a.shape[0]):
+        if not keepv[a[i]]:
+            return None                         # a vertex removed twice
+        remap[a[i]] = b[i]
+        keepv[a[i]] = False
+    for i in range(b.shape[0]):
+        if not keepv[b[i]]:
+            return None                         # a vertex collapsed into a removed one
+    o2n = np.empty(n, np.int64)
+    c = 0
+    for v in range(n):
+        o2n[v] = c
+        if keepv[v]:
+            c += 1
+    m = F.shape[0]
+    F2 = np.empty((m, 3), np.int64)
+    p2 = np.empty(m, fpatch.dtype)
+    k = 0
+    for f in range(m):
+        x, y, z = remap[F[f, 0]], remap[F[f, 1]], remap[F[f, 2]]
+        if x != y and y != z and x != z:
+            F2[k, 0], F2[k, 1], F2[k, 2] = o2n[x], o2n[y], o2n[z]
+            p2[k] = fpatch[f]
+            k += 1
+    # the feature edges remapped, each row (lo, hi), degenerate rows dropped, then sorted by
+    # (lo, hi, chain) with ties in row order (three stable counting passes, last key first)
+    # and one row per pair: remesh._Work.set_features' table, renumbered
+    ne = fe.shape[0]
+    lo = np.empty(ne, np.int64)
+    hi = np.empty(ne, np.int64)
+    rows = np.empty(ne, np.int64)
+    r = 0
+    cmin = 0
+    cmax = 0
+    for i in range(ne):
+        x, y = remap[fe[i, 0]], remap[fe[i, 1]]
+        if x == y:
+            continue
+        lo[i], hi[i] = (x, y) if x < y else (y, x)
+        if r == 0 or fe_chain[i] < cmin:
+            cmin = fe_chain[i]
+        if r == 0 or fe_chain[i] > cmax:
+            cmax = fe_chain[i]
+        rows[r] = i
+        r += 1
+    rows = rows[:r]
+    key = np.empty(ne, np.int64)
+    for i in range(r):
+        key[rows[i]] = fe_chain[rows[i]] - cmin
+    rows = _counting_order(key, cmax - cmin + 1, rows) if r else rows
+    rows = _counting_order(hi, n, rows) if r else rows
+    rows = _counting_order(lo, n, rows) if r else rows
+    fe2 = np.empty((r, 2), np.int64)
+    ch2 = np.empty(r, np.int64)
+    q = 0
+    for j in range(r):
+        i = rows[j]
+        if q and lo[i] == lo[rows[j - 1]] and hi[i] == hi[rows[j - 1]]:
+            continue
+        fe2[q, 0], fe2[q, 1] = o2n[lo[i]], o2n[hi[i]]
+        ch2[q] = fe_chain[i]
+        q += 1
+    return F2[:k], p2[:k], fe2[:q], ch2[:q], keepv
+
+
+def collapse_apply(F, fpatch, fe, fe_chain, a, b, n):
+    """A batch of edge collapses (vertex ``a[i]`` into ``b[i]``, none of the ``b`` removed) on
+    the triangles ``F`` (m, 3) with patches ``fpatch`` and the feature edges ``fe`` (k, 2) with
+    chain ids ``fe_chain``, on ``n`` vertices. Returns ``(F, fpatch, fe, fe_chain, keep)``: the
+    faces left (the two at each collapsed edge drop out, the rest keep their order), the
+    feature edges as ``remesh._Work.set_features`` tabulates them (rows (lo, hi) sorted by
+    (lo, hi, chain), degenerate rows dropped, one row per pair, the lowest chain), both on
+    the vertices renumbered without the removed ones, and ``keep`` (n,) the vertices left.
+    The numpy remap, face filter, set_features and subset_vertices of
+    ``remesh._collapse_edges`` in one compiled pass (the same arrays)."""
+    i64 = lambda x: np.ascontiguousarray(x, dtype=np.int64)     # noqa: E731
+    F = i64(F).reshape(-1, 3)
+    fe = i64(fe).reshape(-1, 2)
+    fpatch = np.ascontiguousarray(fpatch).reshape(-1)
+    fe_chain, a, b = (i64(x).reshape(-1) for x in (fe_chain, a, b))
+    n = int(n)
+    if len(fpatch) != len(F) or len(fe_chain) != len(fe) or len(a) != len(b):
+        raise ValueError("collapse_apply: arrays of mismatched lengths")
+    for name, x in (("F", F), ("fe", fe), ("a", a), ("b", b)):
+        _check_index(name, x, n)
+    out = _collapse_apply(F, fpatch, fe, fe_chain, a, b, n)
+    if out is None:
+        raise ValueError("collapse_apply: each vertex is removed at most once and none into a removed one")
+    return out
+
+
 def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, vtri, tri_n, cos_facing,
                     max_len_ratio=np.inf, fn_old=None, cos_turn=-1.0, surface=None, max_sub=16):
     """The remesh's batch of edge collapses: :func:`greedy_independent_rings` over the
@@ -3073,6 +3168,7 @@ def warm_up() -> float:
                         np.zeros(4, np.int64), e, 0.2, dg, dg)
     _, h0, h1, cnt, E, _ = edge_table(Fq, 4)
     nptr4, nbr4 = edge_neighbours(E, 4)
+    collapse_apply(Fq, np.zeros(2, np.int64), np.array([[0, 1], [1, 3]]), np.array([0, -1]), [3], [0], 4)
     for rf in (None, [3]):
         collapse_directions(E, [0, 1], h0, h1, cnt, Fq, nptr4, nbr4, np.zeros(4, np.int64), np.zeros(5, bool),
                             np.ones(4, bool), remove_first=rf)

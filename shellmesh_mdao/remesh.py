@@ -38,9 +38,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, SizeError
-from .kernels import (collapse_directions, collapse_select, corner_sin_cos, edge_lengths, edge_lookup, edge_neighbours,
-                      edge_rows, edge_table, facing_ok, flip_candidates, greedy_independent, greedy_independent_rings,
-                      group_order, move_tests, rank_desc, triangle_normals)
+from .kernels import (collapse_apply, collapse_directions, collapse_select, corner_sin_cos, edge_lengths, edge_lookup,
+                      edge_neighbours, edge_rows, edge_table, facing_ok, flip_candidates, greedy_independent,
+                      greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -844,20 +844,12 @@ class _Work:
         vp[self.F.reshape(-1)] = np.repeat(self.fpatch, 3)
         return vp
 
-    def subset_vertices(self, keep):
-        """Drop vertices not in ``keep`` (bool); faces and features are renumbered."""
-        o2n = np.cumsum(keep) - 1
+    def keep_vertices(self, keep):
+        """Drop the per-vertex rows not in ``keep`` (bool); faces and features must already be
+        on the new numbering (:func:`~shellmesh_mdao.kernels.collapse_apply`)."""
         for name in ("P", "kind", "S", "vchain", "vin", "vtri", "h"):
             setattr(self, name, getattr(self, name)[keep])
-        self.F = o2n[self.F]
-        fe = self.fe
-        ok = keep[fe[:, 0]] & keep[fe[:, 1]] if len(fe) else np.zeros(0, bool)
-        # fe is as set_features leaves it (rows lo < hi, sorted, unique) and o2n is increasing
-        # on the kept vertices: the renumbered kept rows are too, in the same order
-        self.fe = o2n[fe[ok]]
-        self.fe_chain = self.fe_chain[ok]
         self.touched()
-        return o2n
 
 
 # ============================================================================ context
@@ -1300,17 +1292,10 @@ def _collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, 
             return 0
         a = np.concatenate(acc_a)
         b = np.concatenate(acc_b)
-    remap = np.arange(n)
-    remap[a] = b
-    F2 = remap[F]
-    keepf = (F2[:, 0] != F2[:, 1]) & (F2[:, 1] != F2[:, 2]) & (F2[:, 0] != F2[:, 2])
-    W.F = F2[keepf]
-    W.fpatch = W.fpatch[keepf]
-    if len(W.fe):
-        W.set_features(remap[W.fe], W.fe_chain)
-    keepv = np.ones(n, bool)
-    keepv[a] = False
-    W.subset_vertices(keepv)
+    # faces, feature edges (as set_features tabulates them) and vertex numbering after the
+    # batch, in one compiled pass; then the per-vertex arrays without the removed vertices
+    W.F, W.fpatch, W.fe, W.fe_chain, keepv = collapse_apply(F, W.fpatch, W.fe, W.fe_chain, a, b, n)
+    W.keep_vertices(keepv)
     return len(a)
 
 

@@ -363,24 +363,66 @@ def test_improve_triangles_leaves_quads_alone():
     assert np.array_equal(out.component, m.component)
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_subset_vertices_keeps_the_feature_table_canonical(seed):
-    """Dropping vertices renumbers the feature edges without sorting them again: the same table
-    as set_features of the renumbered kept rows (sorted (lo, hi, chain) rows, one per pair)."""
+@pytest.mark.parametrize("seed", range(5))
+def test_collapse_apply_gives_the_numpy_update(seed):
+    """A batch of collapses applied in one compiled pass (kernels.collapse_apply) against the
+    numpy update it replaced: remap, face filter, set_features of the remapped feature edges
+    (with duplicates, reversed rows and chain ids from -1), then the renumbering without the
+    removed vertices."""
+    from scipy.spatial import Delaunay
+
+    from shellmesh_mdao.kernels import collapse_apply, edge_neighbours, edge_table
     from shellmesh_mdao.remesh import _Work
-    rng = np.random.default_rng(40 + seed)
-    n = 60
-    fe = rng.integers(0, n, (150, 2))                    # repeats, reversed and degenerate rows
-    ch = rng.integers(-1, 5, 150)
-    W = _Work(rng.random((n, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(n, np.int64),
-              np.zeros(n), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), fe, ch, np.ones(n))
-    assert (W.fe[:, 0] < W.fe[:, 1]).all() and len(W.fe) < 150
-    keep = rng.random(n) < 0.7
-    o2n = np.cumsum(keep) - 1
-    ok = keep[W.fe[:, 0]] & keep[W.fe[:, 1]]
-    ref = _Work(rng.random((n, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(n, np.int64),
-                np.zeros(n), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
-                o2n[W.fe[ok]], W.fe_chain[ok], np.ones(n))
-    W.subset_vertices(keep)
-    assert W.n == keep.sum()
-    assert np.array_equal(W.fe, ref.fe) and np.array_equal(W.fe_chain, ref.fe_chain)
+    rng = np.random.default_rng(60 + seed)
+    n = int(rng.integers(30, 300))
+    F = Delaunay(rng.random((n, 2))).simplices.astype(np.int64)
+    _, _, _, _, E, _ = edge_table(F, n)
+    nptr, nbr = edge_neighbours(E, n)
+    # independent collapses: edges whose closed 1-rings do not meet
+    used = np.zeros(n, bool)
+    a, b = [], []
+    for e in rng.permutation(len(E)):
+        u, v = E[e]
+        ring = np.concatenate([[u, v], nbr[nptr[u]:nptr[u + 1]], nbr[nptr[v]:nptr[v + 1]]])
+        if not used[ring].any():
+            used[ring] = True
+            a.append(u) if rng.random() < 0.5 else a.append(v)
+            b.append(v if a[-1] == u else u)
+    a, b = np.array(a, np.int64), np.array(b, np.int64)
+    # feature edges as they come: repeated, reversed and degenerate rows, and for some
+    # collapses both (a, x) and (b, x) for a common neighbour x, which the collapse makes one
+    # pair (the lower chain id stays)
+    fe = [E[rng.choice(len(E), 40)], E[rng.choice(len(E), 10)][:, ::-1], np.array([[3, 3]])]
+    for u, v in zip(a[:8], b[:8]):
+        x = np.intersect1d(nbr[nptr[u]:nptr[u + 1]], nbr[nptr[v]:nptr[v + 1]])[0]
+        fe.append(np.array([[u, x], [x, v], [u, v]]))
+    fe = np.vstack(fe)
+    ch = rng.integers(-1, 4, len(fe))
+
+    def work():
+        return _Work(rng.random((n, 3)), F.copy(), rng.integers(0, 3, len(F)), np.zeros(n, np.int64), np.zeros(n),
+                     np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), fe, ch, np.ones(n))
+    W = work()
+    remap = np.arange(n)
+    remap[a] = b
+    F2 = remap[W.F]
+    keepf = (F2[:, 0] != F2[:, 1]) & (F2[:, 1] != F2[:, 2]) & (F2[:, 0] != F2[:, 2])
+    patch = W.fpatch
+    W.F, W.fpatch = F2[keepf], W.fpatch[keepf]
+    W.set_features(remap[fe], ch)
+    keepv = np.ones(n, bool)
+    keepv[a] = False
+    o2n = np.cumsum(keepv) - 1                          # _Work.subset_vertices before the kernel
+    W.F = o2n[W.F]
+    ok = keepv[W.fe[:, 0]] & keepv[W.fe[:, 1]]
+    W.set_features(o2n[W.fe[ok]], W.fe_chain[ok])
+    W0 = work()
+    F3, p3, fe3, ch3, keep3 = collapse_apply(W0.F, patch, fe, ch, a, b, n)
+    # the collapses made pairs meet, with another chain id each time at least once
+    assert len(np.unique(np.sort(remap[fe], axis=1), axis=0)) < len(np.unique(np.sort(fe, axis=1), axis=0))
+    assert len(a) and keepf.sum() < len(F)
+    assert np.array_equal(F3, W.F) and np.array_equal(p3, W.fpatch) and np.array_equal(keep3, keepv)
+    assert np.array_equal(fe3, W.fe) and np.array_equal(ch3, W.fe_chain)
+    for aa, bb in (([a[0], a[0]], [b[0], b[0]]), ([a[0], a[1]], [a[1], b[1]])):
+        with pytest.raises(ValueError, match="at most once and none into a removed one"):
+            collapse_apply(W0.F, patch, fe, ch, aa, bb, n)
