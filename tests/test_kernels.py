@@ -1378,3 +1378,57 @@ def test_collapse_directions_give_the_numpy_masks(seed):
         ok_ref, dir_ref = _collapse_directions_numpy(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, rf)
         assert np.array_equal(ok, ok_ref) and np.array_equal(dir_ok, dir_ref)
         assert ok.any() and (~ok).any() and dir_ok.any()
+
+
+def _valence_targets_numpy(P, F, n):
+    """remesh._flip_round's target valences before kernels.valence_targets."""
+    from shellmesh_mdao.remesh import _tri_angles
+    ang = np.radians(_tri_angles(P, F))
+    asum = np.zeros(n)
+    for k in range(3):
+        asum += np.bincount(F[:, k], weights=ang[:, k], minlength=n)
+    return np.clip(np.round(asum / (np.pi / 3.0)), 2.0, 9.0)
+
+
+def test_valence_targets_are_numpys():
+    """Target valences from the C library's atan2 against the numpy ones: a curved closed
+    surface, random planar Delaunay meshes, and a right-angled grid whose corners sum to
+    exactly a rounding tie (pi/2 -> 1.5), which must take numpy's rounding (2)."""
+    import trimesh
+    from scipy.spatial import Delaunay
+
+    from shellmesh_mdao.kernels import valence_targets
+    sph = trimesh.creation.icosphere(3)
+    P = sph.vertices * [1.0, 0.7, 0.4]
+    F = sph.faces.astype(np.int64)
+    assert np.array_equal(valence_targets(P, F, len(P)), _valence_targets_numpy(P, F, len(P)))
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        n = int(rng.integers(10, 400))
+        X = np.column_stack([rng.random((n + 3, 2)), np.zeros(n + 3)])
+        F = Delaunay(X[:n, :2]).simplices.astype(np.int64)           # three vertices on no face
+        assert np.array_equal(valence_targets(X, F, n + 3), _valence_targets_numpy(X, F, n + 3))
+    g = np.stack(np.meshgrid(np.arange(5.0), np.arange(4.0)), -1).reshape(-1, 2)
+    X = np.column_stack([g, np.zeros(len(g))])
+    idx = np.arange(20).reshape(4, 5)
+    F = np.concatenate([np.stack([idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:]], -1).reshape(-1, 3),
+                        np.stack([idx[:-1, :-1], idx[1:, 1:], idx[1:, :-1]], -1).reshape(-1, 3)])
+    tgt = valence_targets(X, F, 20)
+    assert np.array_equal(tgt, _valence_targets_numpy(X, F, 20))
+    assert tgt[0] == 2.0 and tgt[4] == 2.0
+
+
+def test_valence_targets_take_numpys_rounding_at_a_tie(monkeypatch):
+    """The reflex corner of an L-shaped grid sums to 270 degrees, a tie (4.5) that numpy rounds
+    to 4: angle sums off by the last bits of another atan2 must not round it the other way,
+    so sums that close to a tie are redone with numpy."""
+    from shellmesh_mdao import kernels
+    g = np.stack(np.meshgrid(np.arange(3.0), np.arange(3.0)), -1).reshape(-1, 2)
+    X = np.column_stack([g, np.zeros(9)])
+    sq = [(0, 1, 4, 3), (1, 2, 5, 4), (3, 4, 7, 6)]                 # three of the four squares
+    F = np.array([t for a, b, c, d in sq for t in ((a, b, c), (a, c, d))], np.int64)
+    assert _valence_targets_numpy(X, F, 9)[4] == 4.0
+    orig = kernels._angle_sums
+    for off in (1e-13, -1e-13):
+        monkeypatch.setattr(kernels, "_angle_sums", lambda P, F, n, off=off: orig(P, F, n) + off)
+        assert np.array_equal(kernels.valence_targets(X, F, 9), _valence_targets_numpy(X, F, 9))
