@@ -40,7 +40,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
            "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
            "collapse_directions", "collapse_apply", "collapse_select", "flip_candidates", "skin_flips", "star_moves",
-           "move_tests", "safe_matching_rounds", "valence_targets",
+           "move_tests", "safe_matching_rounds",
            "warm_up"]
 
 
@@ -3003,57 +3003,6 @@ def triangle_normals(P, F):
     return _tri_normals(P, F)
 
 
-@njit(cache=True, nogil=True)
-def _angle_sums(P, F, n):
-    deg = 180.0 / np.pi
-    rad = np.pi / 180.0
-    m = F.shape[0]
-    ang = np.empty((m, 3))
-    for f in range(m):
-        A, B, C = P[F[f, 0]], P[F[f, 1]], P[F[f, 2]]
-        s0, c0 = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
-        s1, c1 = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2], A[0] - B[0], A[1] - B[1], A[2] - B[2])
-        a0 = math.atan2(s0, c0) * deg
-        a1 = math.atan2(s1, c1) * deg
-        ang[f, 0], ang[f, 1], ang[f, 2] = a0 * rad, a1 * rad, (180.0 - a0 - a1) * rad
-    out = np.zeros(n)
-    part = np.zeros(n)
-    for k in range(3):                       # bincount's sums per corner slot, then added
-        part[:] = 0.0
-        for f in range(m):
-            part[F[f, k]] += ang[f, k]
-        for v in range(n):
-            out[v] += part[v]
-    return out
-
-
-def valence_targets(P, F, n):
-    """The remesh's target valence of each vertex from the angle sum around it:
-    ``clip(round(sum / (pi / 3)), 2, 9)`` with the angles in radians of the degrees of numpy's
-    ``arctan2`` of :func:`corner_sin_cos`' arguments (third angle 180 minus the two), summed
-    per corner slot as ``np.bincount`` does. Computed with the C library's atan2, whose last
-    bits can differ from numpy's AVX-512 loop; a sum that close to a rounding tie (within
-    1e-9 of half an integer after the division) is redone with numpy, so the targets are
-    numpy's in every case."""
-    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
-    F = np.ascontiguousarray(np.asarray(F)[:, :3], dtype=np.int64)
-    n = int(n)
-    _check_index("F", F, n)
-    if n > len(P):
-        raise ValueError(f"valence_targets: {n} vertices but {len(P)} points")
-    x = _angle_sums(P, F, n) / (np.pi / 3.0)
-    near = np.abs(x - np.floor(x) - 0.5) < 1e-9
-    if near.any():
-        sc = _corner_sin_cos(P[F[:, 0]], P[F[:, 1]], P[F[:, 2]])
-        a0, a1 = np.degrees(np.arctan2(sc[0].copy(), sc[1].copy())), np.degrees(np.arctan2(sc[2].copy(), sc[3].copy()))
-        ang = np.radians(np.stack([a0, a1, 180.0 - a0 - a1], 1))
-        asum = np.zeros(n)
-        for k in range(3):
-            asum += np.bincount(F[:, k], weights=ang[:, k], minlength=n)
-        x = asum / (np.pi / 3.0)
-    return np.clip(np.round(x), 2.0, 9.0)
-
-
 def corner_sin_cos(A, B, C):
     """For triangles with corners ``A``, ``B``, ``C`` (k, 3): a (4, k) array of ``|u x v|`` and
     ``u . v`` at corner A (u = B - A, v = C - A) and at corner B (u = C - B, v = A - B), with
@@ -3204,7 +3153,6 @@ def warm_up() -> float:
     Q = np.zeros((2, 3, 3))
     corner_sin_cos(Q[:, 0], Q[:, 1], Q[:, 2])           # the strided corners of a (k, 3, 3) array
     corner_cosines(e[None])
-    valence_targets(e, np.array([[0, 1, 2]]), 3)
     facing_ok(np.array([[0, 1, 2]]), np.zeros(3, np.int64), np.zeros(3, np.int64), e, e[:1], 0.5)
     for surf in (None, (TriangleBVH(e, np.array([[0, 1, 2]])), np.zeros(3))):
         collapse_select(np.array([0, 2, 4, 6]), np.array([1, 2, 0, 2, 0, 1]), np.array([0, 1, 2, 3]),

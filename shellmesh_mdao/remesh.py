@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, SizeError
 from .kernels import (collapse_apply, collapse_directions, collapse_select, corner_sin_cos, edge_lengths, edge_lookup,
                       edge_neighbours, edge_rows, edge_table, facing_ok, flip_candidates, greedy_independent,
-                      greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals, valence_targets)
+                      greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -1316,7 +1316,11 @@ def _flip_round(W, ctx, mode):
         deg = np.diff(nptr).astype(np.float64)
         # target valence from the angle sum around the vertex (6 on smooth regions and
         # at feature-line ends, fewer at cone-like corners; +1 on open boundaries)
-        tgt = valence_targets(P, F, W.n)
+        ang = np.radians(_tri_angles(P, F))
+        asum = np.zeros(W.n)
+        for k in range(3):
+            asum += np.bincount(F[:, k], weights=ang[:, k], minlength=W.n)
+        tgt = np.clip(np.round(asum / (np.pi / 3.0)), 2.0, 9.0)
         bnd = T.valence == 1
         tgt[E[bnd].reshape(-1)] += 1.0
     # in one compiled pass (kernels.flip_candidates): c-d not an edge yet, one patch, the
