@@ -36,7 +36,7 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
-           "group_order", "edge_neighbours", "rank_desc",
+           "group_order", "edge_neighbours", "vertex_faces", "rank_desc",
            "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
            "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
            "collapse_directions", "collapse_apply", "collapse_select", "flip_candidates", "skin_flips", "star_moves",
@@ -1271,6 +1271,42 @@ def group_order(keys, n):
     keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
     _check_index("keys", keys, int(n))
     return _group_order(keys, int(n))
+
+
+@njit(cache=True, nogil=True)
+def _vertex_faces(F, n):
+    ptr = np.zeros(n + 1, np.int64)
+    for f in range(F.shape[0]):
+        for k in range(F.shape[1]):
+            if F[f, k] >= n or F[f, k] < -1:
+                return None
+            if F[f, k] >= 0:
+                ptr[F[f, k] + 1] += 1
+    for v in range(n):
+        ptr[v + 1] += ptr[v]
+    fill = ptr[:n].copy()
+    out = np.empty(ptr[n], np.int64)
+    for f in range(F.shape[0]):
+        for k in range(F.shape[1]):
+            v = F[f, k]
+            if v >= 0:
+                out[fill[v]] = f
+                fill[v] += 1
+    return ptr, out
+
+
+def vertex_faces(F, n):
+    """CSR ``(ptr, faces)`` of the faces around each vertex of the face array ``F`` ((m, 3) or
+    (m, 4), -1 padded) on ``n`` vertices, each vertex's faces in ascending order (a face
+    listing a vertex twice, twice): the stable grouping of the face ids by vertex in one
+    counting pass."""
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    if F.ndim != 2:
+        raise ValueError(f"vertex_faces: faces must be an (m, k) array, got shape {F.shape}")
+    out = _vertex_faces(F, int(n))
+    if out is None:
+        raise ValueError(f"vertex_faces: face entries must be vertex ids below {int(n)} or -1 (padding)")
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -3136,6 +3172,8 @@ def warm_up() -> float:
     rank_desc(np.array([1.0, 0.0]), np.array([3, 2], np.uint64))
     group_order(np.array([1, 0, 1]), 2)
     edge_neighbours(np.array([[0, 1]]), 2)
+    vertex_faces(np.array([[0, 1, 2, -1]]), 3)
+    vertex_faces(np.array([[0, 1, 2]]), 3)
     closest_on_triangles(np.ones((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.eye(3)[1:2])
     TriangleBVH(np.eye(3), np.array([[0, 1, 2]])).closest(np.ones((1, 3)))
     _in_range(np.zeros(1, np.int64), 1)

@@ -570,15 +570,8 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
 def vertex_faces(faces: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
     """CSR list of the faces around each vertex of a face array ((m, 3) triangles or
     (m, 4) mixed, -1 padded): ``faces_of_v = idx[ptr[v]:ptr[v + 1]]`` (ascending face order)."""
-    f = np.asarray(faces)
-    valid = f >= 0
-    fi = np.broadcast_to(np.arange(len(f))[:, None], f.shape)[valid]
-    v = f[valid]
-    from .kernels import stable_order                 # numba: imported on first use
-    order = stable_order(v, n_points)
-    ptr = np.zeros(n_points + 1, np.int64)
-    np.cumsum(np.bincount(v, minlength=n_points), out=ptr[1:])
-    return ptr, fi[order]
+    from .kernels import vertex_faces as _compiled     # numba: imported on first use
+    return _compiled(faces, n_points)
 
 
 def _inconsistent_edges(topo: EdgeTopology, component: np.ndarray) -> np.ndarray:

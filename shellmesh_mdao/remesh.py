@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from .errors import MeshValidationError, SizeError
 from .kernels import (collapse_apply, collapse_directions, collapse_select, corner_sin_cos, edge_lengths, edge_lookup,
                       edge_neighbours, edge_rows, edge_table, facing_ok, flip_candidates, greedy_independent,
-                      greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals)
+                      greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals, vertex_faces)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .project import SurfaceLocator, closest_point_on_triangles
 
@@ -169,8 +169,7 @@ class _Topo:
     def vertex_faces(self, F):
         """CSR (ptr, faces) of the faces around each vertex."""
         if self._vf is None:
-            ptr, order = _csr(F.reshape(-1), self.n)
-            self._vf = (ptr, order // 3)
+            self._vf = vertex_faces(F, self.n)
         return self._vf
 
 
