@@ -36,12 +36,11 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
            "closest_on_curves", "closest_on_triangles", "TriangleBVH", "stable_order", "stable_pair_order",
-           "group_order", "edge_neighbours", "vertex_faces", "rank_desc",
-           "edge_table", "edge_rows", "edge_lookup", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows",
-           "dot_unit_rows", "triangle_normals", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
+           "group_order", "edge_neighbours", "vertex_faces", "rank_desc", "edge_table", "edge_rows", "edge_lookup",
+           "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows", "triangle_normals",
+           "element_normals", "faces_at", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
            "collapse_directions", "collapse_apply", "collapse_select", "flip_candidates", "skin_flips", "star_moves",
-           "move_tests", "safe_matching_rounds",
-           "warm_up"]
+           "move_tests", "safe_matching_rounds", "warm_up"]
 
 
 # ============================================================================ independent sets
@@ -2156,6 +2155,78 @@ def _dot_unit_rows(a):
 
 
 @njit(cache=True, nogil=True)
+def _element_normals(P, faces, is_tri):
+    k = faces.shape[0]
+    n = P.shape[0]
+    out = np.zeros((k, 3))
+    for i in range(k):
+        a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
+        if not (0 <= a < n and 0 <= b < n and 0 <= c < n and (is_tri[i] or 0 <= faces[i, 3] < n)):
+            return None
+        if is_tri[i]:
+            x0, x1, x2 = _cross3(P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2],
+                                 P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2])
+        else:
+            d = faces[i, 3]
+            x0, x1, x2 = _cross3(P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2],
+                                 P[d, 0] - P[b, 0], P[d, 1] - P[b, 1], P[d, 2] - P[b, 2])
+        L = np.sqrt(_dot3e(x0, x1, x2, x0, x1, x2))
+        if L > 0:
+            out[i, 0], out[i, 1], out[i, 2] = x0 / L, x1 / L, x2 / L
+    return out
+
+
+def element_normals(P, faces, is_tri):
+    """Unit normals of mixed elements ``faces`` (m, 4), -1 padded, ``is_tri`` (m,): a
+    triangle's ``cross(B - A, C - A)``, a quad's ``cross(C - A, D - B)`` (its diagonals), over
+    their einsum norm, zero rows where that is not positive: the bits of the smoothing's
+    ``cross_rows`` and ``dot_unit_rows`` on the gathered corners, in one compiled pass."""
+    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    is_tri = np.ascontiguousarray(is_tri, dtype=np.bool_).reshape(-1)
+    if faces.ndim != 2 or faces.shape[1] != 4 or len(is_tri) != len(faces):
+        raise ValueError("element_normals takes (m, 4) faces and one is_tri entry per face")
+    out = _element_normals(P, faces, is_tri)
+    if out is None:
+        raise ValueError(f"element_normals: corners must be point ids below {len(P)} (a quad's fourth too)")
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _faces_at(ptr, vf, verts, m):
+    mark = np.zeros(m, np.bool_)
+    cnt = 0
+    for i in range(verts.shape[0]):
+        v = verts[i]
+        if not 0 <= v < ptr.shape[0] - 1 or not 0 <= ptr[v] <= ptr[v + 1] <= vf.shape[0]:
+            return None
+        for p in range(ptr[v], ptr[v + 1]):
+            if not 0 <= vf[p] < m:
+                return None
+            if not mark[vf[p]]:
+                mark[vf[p]] = True
+                cnt += 1
+    out = np.empty(cnt, np.int64)
+    k = 0
+    for f in range(m):
+        if mark[f]:
+            out[k] = f
+            k += 1
+    return out
+
+
+def faces_at(ptr, vf, verts, m):
+    """Sorted ids of the faces incident to the vertices ``verts``, with the vertex-face CSR
+    ``ptr``/``vf`` (:func:`vertex_faces`) of ``m`` faces."""
+    ptr, vf, verts = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (ptr, vf, verts))
+    out = _faces_at(ptr, vf, verts, int(m))
+    if out is None:
+        raise ValueError(f"faces_at: vertex ids must be rows of ptr, ptr row pointers into vf and vf face ids "
+                         f"below {int(m)}")
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _tri_normals(P, F):
     k = F.shape[0]
     out = np.empty((k, 3))
@@ -3187,6 +3258,8 @@ def warm_up() -> float:
     dot_unit_rows(e)
     edge_lengths(e, np.array([[0, 1]]))
     triangle_normals(e, np.array([[0, 1, 2]]))
+    element_normals(np.vstack([e, [1.0, 1.0, 0.0]]), np.array([[0, 1, 2, -1], [0, 1, 3, 2]]), np.array([True, False]))
+    faces_at(np.array([0, 1, 2, 2]), np.array([0, 0]), np.array([0, 2]), 1)
     corner_sin_cos(e[:1], e[1:2], e[2:])
     Q = np.zeros((2, 3, 3))
     corner_sin_cos(Q[:, 0], Q[:, 1], Q[:, 2])           # the strided corners of a (k, 3, 3) array

@@ -65,7 +65,8 @@ from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
 from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
-                      face_quality, min_corner_sj, ortho_gradient, ortho_jacobian, pair_difference)
+                      element_normals, face_quality, faces_at, min_corner_sj, ortho_gradient, ortho_jacobian,
+                      pair_difference)
 from .mesh import (ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows,
                    unique_edges, vertex_faces)
 from .project import SurfaceLocator, closest_point_on_triangles
@@ -657,7 +658,9 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
 
 # ============================================================================ element checks
 def _face_normals(P, faces, is_tri):
-    return _corner_normals(P[np.where(faces >= 0, faces, faces[:, :1])], is_tri)
+    """Unit normals of the elements (:func:`_corner_normals` of their corners, in one compiled
+    pass: :func:`~shellmesh_mdao.kernels.element_normals`)."""
+    return element_normals(P, faces, is_tri)
 
 
 def _corner_normals(c, is_tri):
@@ -876,15 +879,9 @@ def _solve_kkt(K3, rho_v, mesh_n, g, supports, T, owner):
 
 
 def _faces_of(ptr, vf, verts, m):
-    """Sorted ids of the faces incident to ``verts`` (CSR ``ptr``/``vf`` of ``m`` faces)."""
-    cnt = ptr[verts + 1] - ptr[verts]
-    if not cnt.sum():
-        return np.zeros(0, np.int64)
-    starts = np.repeat(ptr[verts], cnt)
-    offs = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    mask = np.zeros(m, bool)
-    mask[vf[starts + offs]] = True
-    return np.flatnonzero(mask)
+    """Sorted ids of the faces incident to ``verts`` (CSR ``ptr``/``vf`` of ``m`` faces; a
+    compiled pass, :func:`~shellmesh_mdao.kernels.faces_at`)."""
+    return faces_at(ptr, vf, verts, m)
 
 
 def _face_rings(faces, ptr, vf, verts, rings: int = 2):

@@ -1378,3 +1378,34 @@ def test_collapse_directions_give_the_numpy_masks(seed):
         ok_ref, dir_ref = _collapse_directions_numpy(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, rf)
         assert np.array_equal(ok, ok_ref) and np.array_equal(dir_ok, dir_ref)
         assert ok.any() and (~ok).any() and dir_ok.any()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_element_normals_and_faces_at_match_numpy(seed):
+    """The smoothing's element normals and incident-face lists in compiled passes against the
+    numpy code they replaced: the corners gathered with the padding replaced by corner 0,
+    ``cross_rows`` (quad diagonals, triangle sides) over ``dot_unit_rows``, degenerate
+    elements zero; the faces at a set of vertices from a mask."""
+    from shellmesh_mdao.kernels import element_normals, faces_at
+    from shellmesh_mdao.mesh import vertex_faces
+    from shellmesh_mdao.smooth import _corner_normals
+    rng = np.random.default_rng(80 + seed)
+    n, m = 60, 300
+    P = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-3, 3)
+    faces = rng.integers(0, n, (m, 4))
+    is_tri = rng.random(m) < 0.4
+    faces[is_tri, 3] = -1
+    faces[:5, 1] = faces[:5, 0]                          # degenerate: zero normals
+    ref = _corner_normals(P[np.where(faces >= 0, faces, faces[:, :1])], is_tri)
+    got = element_normals(P, faces, is_tri)
+    assert np.array_equal(got, ref) and not got[:5][is_tri[:5]].any()
+    ptr, vf = vertex_faces(faces, n)
+    for verts in (rng.choice(n, 7, replace=False), np.zeros(0, np.int64), np.arange(n)):
+        cnt = ptr[verts + 1] - ptr[verts]
+        mask = np.zeros(m, bool)
+        mask[vf[np.repeat(ptr[verts], cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)]] = True
+        assert np.array_equal(faces_at(ptr, vf, verts, m), np.flatnonzero(mask))
+    with pytest.raises(ValueError, match="below"):
+        faces_at(ptr, vf, [n], m)
+    with pytest.raises(ValueError, match="below"):
+        element_normals(P, np.where(is_tri[:, None], faces, n), is_tri)
