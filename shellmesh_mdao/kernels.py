@@ -2033,10 +2033,23 @@ def _segments_within(q, a, ab, eps):
     qi = np.empty(cap, np.int64)
     si = np.empty(cap, np.int64)
     tt = np.empty(cap, np.float64)
+    # each segment's box grown by eps and a slack far above the rounding of its closest points:
+    # a point outside it is farther than eps from the segment in the formula's arithmetic too
+    box = np.empty((s, 6))
+    for j in range(s):
+        sl = eps + 1e-9 * (abs(a[j, 0]) + abs(a[j, 1]) + abs(a[j, 2]) + abs(ab[j, 0]) + abs(ab[j, 1])
+                           + abs(ab[j, 2]) + eps)
+        for d in range(3):
+            e = a[j, d] + ab[j, d]
+            box[j, d] = min(a[j, d], e) - sl
+            box[j, 3 + d] = max(a[j, d], e) + sl
     k = 0
     for i in range(m):
         q0, q1, q2 = q[i, 0], q[i, 1], q[i, 2]
         for j in range(s):
+            if (q0 < box[j, 0] or q0 > box[j, 3] or q1 < box[j, 1] or q1 > box[j, 4] or q2 < box[j, 2]
+                    or q2 > box[j, 5]):
+                continue
             t, _, _, _, d = _on_segment_ab(q0, q1, q2, a, ab, j)
             if d <= eps:
                 if k == cap:

@@ -514,6 +514,12 @@ def test_segment_hits_scan_and_kd_tree_agree(seed, monkeypatch):
     eps = 0.05
     q = np.vstack([a[:30], b[30:60], 0.5 * (a[60:90] + b[60:90]), rng.normal(size=(200, 3))])
     q[-10:] = a[-10:] + [eps * 1.0001, 0, 0]
+    # at the edge of the scan's pruning boxes: axis-aligned segments with points beside them at
+    # eps, just inside and just outside it
+    a[-20:-10] = np.round(a[-20:-10], 1)
+    b[-20:-10] = a[-20:-10] + [0.0, 0.25, 0.0]
+    f = np.array([1.0, 1 - 1e-15, 1 + 1e-15, 1 - 1e-9, 1 + 1e-9, 1.0, 1.0, 1.0, 1 - 1e-12, 1 + 1e-12])
+    q[-20:-10] = a[-20:-10] + np.array([[0.0, 0.1, 0.0]]) + f[:, None] * [eps, 0, 0]
     got = imp._segment_hits(q, a, b, eps)
     monkeypatch.setattr(imp, "SCAN_WORK", 0)
     ref = imp._segment_hits(q, a, b, eps)
