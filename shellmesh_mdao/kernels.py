@@ -1144,6 +1144,8 @@ def _min_corner_sj(P, faces, is_tri, nref, use_ref, tri_scale):
     for f in range(m):
         k = 3 if is_tri[f] else 4
         for i in range(k):
+            if not 0 <= faces[f, i] < P.shape[0]:
+                return None
             for d in range(3):
                 C[i, d] = P[faces[f, i], d]
         _element_frame(C, k, E, cr, L, nn)
@@ -1207,13 +1209,14 @@ def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
     is_tri = np.ascontiguousarray(is_tri, dtype=np.bool_).reshape(-1)
     if len(is_tri) != len(faces):
         raise ValueError("is_tri must have one entry per face")
-    used = np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]])
-    _check_index("faces", used, len(P))
     use_ref = nref is not None
     nref = np.ascontiguousarray(nref if use_ref else np.zeros((len(faces), 3)), dtype=np.float64).reshape(-1, 3)
     if len(nref) != len(faces):
         raise ValueError("nref must have one normal per face")
-    return _min_corner_sj(P, faces, is_tri, nref, use_ref, float(tri_scale))
+    out = _min_corner_sj(P, faces, is_tri, nref, use_ref, float(tri_scale))
+    if out is None:                                  # an index out of range, found in the loop
+        raise ValueError(f"faces: corner ids must be point ids below {len(P)} (a quad's fourth too)")
+    return out
 
 
 # ============================================================================ sorting

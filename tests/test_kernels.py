@@ -367,6 +367,10 @@ def test_min_corner_sj_known_values():
     pad = np.column_stack([tri3, [-1, -1]])
     yes = np.array([True, True])
     assert np.array_equal(min_corner_sj(P, tri3, yes), min_corner_sj(P, pad, yes))
+    # corner ids out of range are refused (a quad's fourth included, a triangle's padding not)
+    for bad, tri in (([0, 1, 6, -1], True), ([0, 1, 2, -1], False), ([0, 1, 2, 6], False)):
+        with pytest.raises(ValueError, match="below 6"):
+            min_corner_sj(P, np.array([bad]), np.array([tri]))
 
 
 def test_ortho_jacobian_of_a_right_angle_is_zero():
