@@ -1214,8 +1214,9 @@ def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
     if len(nref) != len(faces):
         raise ValueError("nref must have one normal per face")
     out = _min_corner_sj(P, faces, is_tri, nref, use_ref, float(tri_scale))
-    if out is None:                                  # an index out of range, found in the loop
-        raise ValueError(f"faces: corner ids must be point ids below {len(P)} (a quad's fourth too)")
+    if out is None:                    # an index out of range, found in the loop: say which
+        _check_index("faces", np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]]), len(P))
+        raise ValueError(f"faces holds indices outside [0, {len(P)})")
     return out
 
 
@@ -1306,8 +1307,9 @@ def vertex_faces(F, n):
     if F.ndim != 2:
         raise ValueError(f"vertex_faces: faces must be an (m, k) array, got shape {F.shape}")
     out = _vertex_faces(F, int(n))
-    if out is None:
-        raise ValueError(f"vertex_faces: face entries must be vertex ids below {int(n)} or -1 (padding)")
+    if out is None:                    # an entry out of range, found in the loop: say which
+        _check_index("faces", F[F != -1], int(n))
+        raise ValueError(f"faces holds indices outside [0, {int(n)})")
     return out
 
 
@@ -2203,8 +2205,9 @@ def element_normals(P, faces, is_tri):
     if faces.ndim != 2 or faces.shape[1] != 4 or len(is_tri) != len(faces):
         raise ValueError("element_normals takes (m, 4) faces and one is_tri entry per face")
     out = _element_normals(P, faces, is_tri)
-    if out is None:
-        raise ValueError(f"element_normals: corners must be point ids below {len(P)} (a quad's fourth too)")
+    if out is None:                    # an index out of range, found in the loop: say which
+        _check_index("faces", np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]]), len(P))
+        raise ValueError(f"faces holds indices outside [0, {len(P)})")
     return out
 
 
@@ -2236,9 +2239,10 @@ def faces_at(ptr, vf, verts, m):
     ``ptr``/``vf`` (:func:`vertex_faces`) of ``m`` faces."""
     ptr, vf, verts = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (ptr, vf, verts))
     out = _faces_at(ptr, vf, verts, int(m))
-    if out is None:
-        raise ValueError(f"faces_at: vertex ids must be rows of ptr, ptr row pointers into vf and vf face ids "
-                         f"below {int(m)}")
+    if out is None:                    # found in the loop: say which
+        _check_index("verts", verts, len(ptr) - 1)
+        _check_index("vf", vf, int(m))
+        raise ValueError("faces_at: ptr must be row pointers into vf")
     return out
 
 

@@ -199,8 +199,10 @@ def test_vertex_faces_match_the_numpy_grouping(seed):
         ptr, idx = vertex_faces(faces, n + 2)
         assert np.array_equal(idx, fi[np.argsort(v, kind="stable")])
         assert np.array_equal(ptr, np.concatenate([[0], np.cumsum(np.bincount(v, minlength=n + 2))]))
-    with pytest.raises(ValueError, match="below"):
+    with pytest.raises(ValueError, match="faces holds indices outside"):
         vertex_faces(np.array([[0, 1, n + 5]]), n + 2)
+    with pytest.raises(ValueError, match="faces holds indices outside"):
+        vertex_faces(np.array([[0, 1, -2]]), n + 2)
 
 
 def test_norm_rows_is_bit_identical_to_np_linalg_norm():
