@@ -2636,8 +2636,8 @@ def collapse_apply(F, fpatch, fe, fe_chain, a, b, n):
     feature edges as ``remesh._Work.set_features`` tabulates them (rows (lo, hi) sorted by
     (lo, hi, chain), degenerate rows dropped, one row per pair, the lowest chain), both on
     the vertices renumbered without the removed ones, and ``keep`` (n,) the vertices left.
-    The numpy remap, face filter, set_features and subset_vertices of
-    ``remesh._collapse_edges`` in one compiled pass (the same arrays)."""
+    The numpy update ``remesh._collapse_edges`` made before it (remap, face filter,
+    set_features, renumbering) in one compiled pass (the same arrays)."""
     i64 = lambda x: np.ascontiguousarray(x, dtype=np.int64)     # noqa: E731
     F = i64(F).reshape(-1, 3)
     fe = i64(fe).reshape(-1, 2)
