@@ -3190,7 +3190,14 @@ def _closest_on_curves(q, cid, start, stop, a, ab, L):
         best, bs = np.inf, -1
         bx0 = bx1 = bx2 = np.nan
         for s in range(start[cid[i]], stop[cid[i]]):
-            t = _dot3(q0 - a[s, 0], q1 - a[s, 1], q2 - a[s, 2], ab[s, 0], ab[s, 1], ab[s, 2])
+            f0, f1, f2 = q0 - a[s, 0], q1 - a[s, 1], q2 - a[s, 2]
+            if best < np.inf:
+                # every point of the segment is within L[s] of a[s]: one farther than best + L[s]
+                # (with a slack far above the rounding) cannot be nearer nor tie
+                r = best + L[s]
+                if f0 * f0 + f1 * f1 + f2 * f2 > r * r * (1.0 + 1e-9) + 1e-300:
+                    continue
+            t = _dot3(f0, f1, f2, ab[s, 0], ab[s, 1], ab[s, 2])
             t = _clip01(t / (L[s] * L[s]))
             x0, x1, x2 = a[s, 0] + t * ab[s, 0], a[s, 1] + t * ab[s, 1], a[s, 2] + t * ab[s, 2]
             e0, e1, e2 = x0 - q0, x1 - q1, x2 - q2
@@ -3212,7 +3219,9 @@ def closest_on_curves(q, cid, start, stop, a, ab, L):
     ``start[cid[i]] .. stop[cid[i]] - 1``. Returns ``(points (k, 3), distances (k,), segments
     (k,))``: over every segment of the polyline, the nearest, then the lowest segment index;
     the same bits as the numpy formulas of :func:`~shellmesh_mdao.smooth._pick_nearest` over
-    any set of candidates that holds the nearest segments."""
+    any set of candidates that holds the nearest segments. ``L`` must be the segments' lengths
+    (``norm(ab)``): a segment whose start is farther than the best distance so far plus its
+    length is skipped."""
     q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
     cid = np.ascontiguousarray(cid, dtype=np.int64).reshape(-1)
     start = np.ascontiguousarray(start, dtype=np.int64)
