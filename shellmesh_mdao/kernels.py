@@ -1487,11 +1487,28 @@ def _edge_lookup(E, kptr, u, v):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _edge_rows(E, n):
+    ptr = np.zeros(n + 1, np.int64)
+    for e in range(E.shape[0]):
+        if not 0 <= E[e, 0] < n:
+            return None
+        ptr[E[e, 0] + 1] += 1
+    for k in range(n):
+        ptr[k + 1] += ptr[k]
+    return ptr
+
+
 def edge_rows(E, n):
     """Row pointers ``kptr`` (n + 1,) of the edge table ``E`` (e, 2) of :func:`edge_table` (rows
-    ``(lo, hi)`` sorted): the rows whose lower end is ``lo`` are ``E[kptr[lo]:kptr[lo + 1]]``."""
-    E = np.asarray(E).reshape(-1, 2)
-    return np.concatenate([[0], np.cumsum(np.bincount(E[:, 0], minlength=int(n)))])
+    ``(lo, hi)`` sorted): the rows whose lower end is ``lo`` are ``E[kptr[lo]:kptr[lo + 1]]``
+    (the counts of the lower ends, summed, in one compiled pass)."""
+    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
+    out = _edge_rows(E, int(n))
+    if out is None:                    # a lower end out of range, found in the loop: say which
+        _check_index("E", E[:, 0], int(n))
+        raise ValueError(f"E holds indices outside [0, {int(n)})")
+    return out
 
 
 def edge_lookup(E, kptr, u, v):
@@ -3318,4 +3335,5 @@ def warm_up() -> float:
                np.zeros(3, np.int64), np.ones(3, bool), e, 0.5, 0.2)
     star_moves(np.array([0]), np.array([0]), Fq, np.vstack([e, [1.0, -1.0, 0.0]]), np.ones((4, 3)), np.ones((2, 3)))
     edge_lookup(np.array([[0, 1], [0, 2], [1, 2]]), np.array([0, 2, 3, 3]), np.array([0, 2]), np.array([1, 1]))
+    edge_rows(np.array([[0, 1], [0, 2], [1, 2]]), 3)
     return time.perf_counter() - t0

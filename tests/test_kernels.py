@@ -439,6 +439,12 @@ def test_counting_sorts_give_numpy_stable_argsort(seed):
     vptr, nbr = edge_neighbours(E, n)
     assert np.array_equal(nbr, dst[np.argsort(src, kind="stable")])
     assert np.array_equal(vptr, np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))]))
+    # the edge table's row pointers against the numpy counts they replaced
+    from shellmesh_mdao.kernels import edge_rows
+    Es = E[np.lexsort((E[:, 1], E[:, 0]))]
+    assert np.array_equal(edge_rows(Es, n), np.concatenate([[0], np.cumsum(np.bincount(Es[:, 0], minlength=n))]))
+    with pytest.raises(ValueError, match="E holds indices outside"):
+        edge_rows(np.array([[0, 1], [n, 0]]), n)
 
 
 
