@@ -1258,13 +1258,7 @@ def _group_order(keys, n):
         ptr[keys[i] + 1] += 1
     for k in range(n):
         ptr[k + 1] += ptr[k]
-    fill = ptr[:n].copy()
-    order = np.empty(keys.shape[0], np.int64)
-    for i in range(keys.shape[0]):
-        k = keys[i]
-        order[fill[k]] = i
-        fill[k] += 1
-    return ptr, order
+    return ptr, _counting_order(keys, n, np.arange(keys.shape[0]))
 
 
 def group_order(keys, n):

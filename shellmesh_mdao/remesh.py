@@ -96,11 +96,6 @@ def _tri_angles(P, F):
     return np.stack([a0, a1, 180.0 - a0 - a1], 1)
 
 
-def _csr(keys, n):
-    """Order and row pointers grouping ``arange(len(keys))`` by ``keys`` in [0, n)."""
-    return group_order(keys, n)
-
-
 def _expand(ptr, rows):
     """For CSR pointers ``ptr`` and row ids ``rows``: (which row of ``rows``, position in the
     CSR value array) for every entry of those rows."""
@@ -379,7 +374,7 @@ class _Surface:
             # turning angle at degree-2 vertices
             ends = FE.reshape(-1)
             other = FE[:, ::-1].reshape(-1)
-            ptr, order = _csr(ends, nv)
+            ptr, order = group_order(ends, nv)
             v2 = np.flatnonzero(deg == 2)
             n1 = other[order[ptr[v2]]]
             n2 = other[order[ptr[v2] + 1]]
@@ -392,7 +387,7 @@ class _Surface:
             ends = FE.reshape(-1)
             eid = np.repeat(np.arange(k), 2)
             nc = ~corner[ends]
-            ptr, order = _csr(ends[nc], nv)
+            ptr, order = group_order(ends[nc], nv)
             # each non-corner vertex has exactly two feature edges: connect them
             vs = np.flatnonzero(np.diff(ptr) == 2)
             ea = eid[nc][order[ptr[vs]]]
@@ -1431,7 +1426,7 @@ def _relax(W, ctx, lam=1.0, move_chains=True, movable=None, min_angle_floor=10.0
         ends = fe.reshape(-1)
         oth = fe[:, ::-1].reshape(-1)
         ech = np.repeat(W.fe_chain, 2)
-        ptr, order = _csr(ends, n)
+        ptr, order = group_order(ends, n)
         good = (ptr[ci + 1] - ptr[ci]) == 2
         ci = ci[good]
         u = oth[order[ptr[ci]]]
@@ -1493,7 +1488,7 @@ def _accept_moves(W, ctx, newP, newtri, newS, moved, An_old, area_old, max_turn=
 # ============================================================================ driver
 def _work_from_surface(surf):
     nv = len(surf.P)
-    ptr, order = _csr(surf.T.reshape(-1), nv)
+    ptr, order = group_order(surf.T.reshape(-1), nv)
     vtri = np.where(np.diff(ptr) > 0, order[np.minimum(ptr[:-1], len(order) - 1)] // 3, -1)
     vtri = np.where(surf.v_kind == _REGULAR, vtri, -1)
     vin = np.where(surf.v_kind == _CORNER, np.arange(nv), -1)
