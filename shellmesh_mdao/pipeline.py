@@ -51,6 +51,15 @@ class PipelineOptions:
                           triangulation as it is; for tests).
     ``remesh_deviation``  chordal deviation allowed between the remeshed skin and the input, as a
                           fraction of the remesh edge length (edges shrink where curvature needs it).
+    ``remesh_pass_fraction`` the remesh's deviation passes (which shrink the sizing where edges
+                          still deviate more than that and re-run four sweeps over the whole skin)
+                          run only while more than this fraction of the edges deviate
+                          (``deviation_pass_fraction`` of :func:`~shellmesh_mdao.remesh.remesh_skin`);
+                          fewer are split where they are by its last-resort deviation splits, which
+                          hold the bound either way. Default 0.02: the corpus has at most 0.7 % (its
+                          passes cost 0.45 s of the target case's remesh, and the merge's valence term
+                          more than makes up the scaled Jacobian they bought), the default wing
+                          4 %; 0 runs them for any deviating edge (docs/benchmarks.md).
     ``snap``              the imprint moves a skin vertex onto a member plane when it lies within
                           this fraction of its shortest incident edge of it (instead of cutting a
                           sliver beside it); below 0.5, default 0.4 (fewer triangles beside the
@@ -69,8 +78,17 @@ class PipelineOptions:
                           0 the MIP prefers quads even where two triangles score slightly better,
                           which leaves fewer triangles for the final subdivision (each gives
                           three 120-degree-cornered quads).
-    ``smooth_iterations`` trust-region steps of the smoothing QP before subdivision;
-                          ``final_iterations`` after it.
+    ``merge_valence_weight`` weight of the merge's valence term (beyond the paper): each free
+                          skin and member node (not on a chain, feature line or junction) adds this
+                          times ``|valence - 4|``, its valence counted after the merge, to the
+                          merge's objective (:func:`~shellmesh_mdao.merge.merge_triangles`'s
+                          ``valence_weight``): the subdivided quads around a node of valence 3, 5
+                          or 6 cannot all be square. Default 0.5 (the corpus's skin mean scaled
+                          Jacobian +0.003 to +0.007, docs/benchmarks.md); 0 turns it off.
+    ``smooth_iterations`` trust-region steps of the smoothing QP before subdivision (default 10);
+                          ``final_iterations`` after it (default 8), ``final_warp_iterations`` in
+                          the second final pass with the quad planarity term (default 10; see
+                          ``final_warp_weight``).
     ``guard_jacobian``    a subdivided element whose projected new nodes would bring its scaled
                           Jacobian to or below this keeps them at their linear position.
     ``smooth_energy``     energy of both smoothing passes: ``"squared"`` (default: edges aim at the
@@ -117,14 +135,17 @@ class PipelineOptions:
 
     remesh: bool = True
     remesh_deviation: float = 0.1
+    remesh_pass_fraction: float = 0.02
     snap: float = 0.4
     chain_deviation: float = 0.01
     split_time_limit: float = 60.0
     merge_time_limit: float = 60.0
     merge_mip_gap: float = 0.01
     merge_bonus: float = 1.0
+    merge_valence_weight: float = 0.5
     smooth_iterations: int = 10
-    final_iterations: int = 10
+    final_iterations: int = 8
+    final_warp_iterations: int = 10
     guard_jacobian: float = 0.2
     smooth_jacobian: float = 0.4
     smooth_energy: str = "squared"
@@ -317,6 +338,7 @@ def stage_remesh(state: PipelineState) -> PipelineState:
     if state.options.remesh:
         target = REMESH_FACTOR * state.size
         skin = remesh_skin(state.surface, target, max_deviation=state.options.remesh_deviation * target,
+                           deviation_pass_fraction=state.options.remesh_pass_fraction,
                            locator=state.locator)
     return state.but(mesh=skin, stage="remesh")
 
@@ -382,12 +404,18 @@ def stage_split(state: PipelineState) -> PipelineState:
 def stage_merge(state: PipelineState) -> PipelineState:
     """Triangle-merging MIP (paper eq. 4-5) on the whole mesh."""
     from .merge import merge_triangles
-    from .smooth import pipeline_supports
+    from .smooth import PLANE, SURFACE, pipeline_supports
 
     _need(state, "merge")
     o = state.options
+    # the valence term counts the nodes free to move within their surface or member plane: on
+    # chains, feature lines and junctions the best valence is not 4
+    sp = state.supports
+    free = (np.flatnonzero(np.isin(sp.kind, (SURFACE, PLANE)))
+            if sp is not None and sp.n == state.mesh.n_points else None)
     mesh, res = merge_triangles(state.mesh, time_limit=o.merge_time_limit, mip_gap=o.merge_mip_gap,
-                                merge_bonus=o.merge_bonus)
+                                merge_bonus=o.merge_bonus, valence_weight=o.merge_valence_weight,
+                                valence_vertices=free)
     # a merge joins two triangles of one component across an edge that is no feature edge: no
     # point, feature edge or fixed vertex changes, nor any vertex's set of incident supports, so
     # the split stage's supports hold as they are (the same arrays as deriving them again)
@@ -402,7 +430,8 @@ def stage_merge(state: PipelineState) -> PipelineState:
     st = state.but(mesh=mesh, supports=sup, stage="merge")
     st.report["merge"] = {"status": res.status, "objective": float(res.objective), "mip_gap": float(res.mip_gap),
                           "n_merged": int(res.n_merged), "n_candidates": int(res.n_candidates),
-                          "quad_fraction": round(float(res.quad_fraction), 4), "seconds": round(res.seconds, 4)}
+                          "quad_fraction": round(float(res.quad_fraction), 4), "seconds": round(res.seconds, 4),
+                          "solve_seconds": round(res.solve_seconds, 4), "valence_weight": o.merge_valence_weight}
     return st
 
 
@@ -441,7 +470,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
     report key ``planarize``). Where the warp p99 is above ``warp_goal`` after the final smoothing
     and that last move alone does not bring it to the goal, a second smoothing pass with the quad
     planarity term runs first, around the quads that move left above the goal (``final_warp_weight``;
-    report key ``final_smooth.warp_term``)."""
+    report key ``final_smooth.warp_term``); its result, moved the same way, is kept only if its warp
+    p99 is below the move alone's (``warp_term.kept``: ``"pass"`` or ``"planarize_alone"``)."""
     from .mesh import vertex_faces
     from .quad import subdivide_to_quads
     from .smooth import _face_rings, mesh_figures, smooth
@@ -486,7 +516,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
             region = _face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
             movable = np.unique(q.faces[region])
             movable = movable[movable >= 0]
-            q, res2 = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy,
+            first = (q, res)
+            q, res2 = smooth(q, sup, iterations=o.final_warp_iterations, energy=o.smooth_energy,
                              target_edge=state.size, ortho_weight=o.final_ortho_weight,
                              warp_weight=o.final_warp_weight, warp_from=o.warp_from, vertices=movable,
                              figures="after")
@@ -497,6 +528,16 @@ def stage_quad(state: PipelineState) -> PipelineState:
                     "iterations", "seconds", "factorisations", "n_step_halvings", "n_rejected", "n_fold_hits",
                     "n_jump_hits")})
             warp_term.update(applied=True, warp_p99_after=_warp_p99(q), vertices=int(len(movable)))
+            if trial is not None:
+                # the pass and the move after it must beat the move alone, else the move alone
+                # on the first pass's mesh is kept (its scaled Jacobians are the better ones)
+                done = _finish_quads(state, q, sup)
+                if done["planar"]["warp_p99_after"] >= trial["planar"]["warp_p99_after"]:
+                    done, (q, res) = trial, first
+                    res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, state.size))
+                    warp_term["kept"] = "planarize_alone"
+                else:
+                    warp_term["kept"] = "pass"
         else:
             res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, state.size))
     if done is None:

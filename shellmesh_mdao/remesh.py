@@ -1631,7 +1631,8 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
                 max_deviation: float | None = None, iterations: int = 8, min_edge: float | None = None,
                 gradation: float = 0.5, corner_angle: float = 50.0, wedge_angle: float = 20.0,
                 keep_component_borders: bool = True,
-                deviation_passes: int = 2, deviation_splits: bool = True, finish_rounds: int = 4,
+                deviation_passes: int = 2, deviation_pass_fraction: float = 0.0, deviation_splits: bool = True,
+                finish_rounds: int = 4,
                 max_flip_dihedral: float = 120.0,
                 locator: SurfaceLocator | None = None,
                 report: dict | None = None, log=None) -> ShellMesh:
@@ -1683,7 +1684,11 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         Also keep borders between input components as feature lines.
     deviation_passes : int
         Extra passes that shrink the sizing where the measured deviation exceeds
-        ``max_deviation`` and remesh again.
+        ``max_deviation`` and remesh again (each re-runs ``iterations // 2`` sweeps and the
+        finishing rounds over the whole skin).
+    deviation_pass_fraction : float
+        A pass runs only while more than this fraction of the edges deviate (default 0: any
+        edge); fewer are left to the deviation splits, which split them where they are.
     deviation_splits : bool
         Finally split the edges still deviating too much (see the guarantee above).
     finish_rounds : int
@@ -1767,7 +1772,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         E = T.E
         L = edge_lengths(W.P, E)
         over = (dm > delta) & (L > _HI * h_min)
-        if not over.any():
+        if not over.any() or over.sum() <= deviation_pass_fraction * len(over):
             break
         passes += 1
         # shrink the field at the input triangles under the offending edges

@@ -247,6 +247,25 @@ def test_remesh_is_deterministic(geometry_dir, manifest):
     assert np.array_equal(a.component, b.component)
 
 
+def test_deviation_passes_run_only_above_their_fraction(geometry_dir, manifest):
+    # cessna210 at 0.5: 104 of about 15,800 edges (0.7 %) deviate more than max_deviation after
+    # the sweeps. With deviation_pass_fraction 0.01 no pass runs (the same mesh as without
+    # passes, bit for bit), with 0.005 they do (another mesh). The deviation splits keep the
+    # bound either way, but for the edges they may not split (a new angle below 20 degrees):
+    # 9 of them without the passes, up to 1.34 max_deviation; none with them
+    skin, _ = load_surface(geometry_dir / manifest["geometries"]["cessna210"]["file"])
+    target = 0.5
+    delta = DEFAULT_DEVIATION_FRACTION * target
+    r0, r1, r2 = {}, {}, {}
+    none = remesh_skin(skin, target, deviation_passes=0, report=r0)
+    above = remesh_skin(skin, target, deviation_pass_fraction=0.01, report=r1)
+    ran = remesh_skin(skin, target, deviation_pass_fraction=0.005, report=r2)
+    assert np.array_equal(none.points, above.points) and np.array_equal(none.faces, above.faces)
+    assert ran.n_faces != none.n_faces or not np.array_equal(ran.points, none.points)
+    assert r2["deviation_edge_midpoints"] <= MAX_DEV["cessna210"] * delta
+    assert r0["deviation_edge_midpoints"] <= 1.5 * delta and r0["n_edges_over_deviation"] <= 20
+
+
 def test_input_resolution_does_not_set_output_resolution(corpus):
     skin, out, _, target = corpus("straight_wing")
     import trimesh
