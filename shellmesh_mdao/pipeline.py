@@ -392,9 +392,18 @@ def stage_split(state: PipelineState) -> PipelineState:
 
     _need(state, "split")
     sup = pipeline_supports(state.mesh, state.locator, state.infos)
-    mesh, res = split_polygons(state.mesh, time_limit=state.options.split_time_limit,
-                               project=edge_midpoint_projector(state.mesh, sup))
-    sup = pipeline_supports(mesh, state.locator, state.infos)
+    before = state.mesh
+    mesh, res = split_polygons(before, time_limit=state.options.split_time_limit,
+                               project=edge_midpoint_projector(before, sup))
+    # where no edge was split (the target case) the mesh is the same and so are its supports
+    same = (np.array_equal(mesh.points, before.points) and np.array_equal(mesh.faces, before.faces)
+            and np.array_equal(mesh.component, before.component)
+            and np.array_equal(mesh.feature_edges, before.feature_edges)
+            and np.array_equal(mesh.feature_edge_ids, before.feature_edge_ids)
+            and np.array_equal(mesh.fixed_vertices, before.fixed_vertices)
+            and mesh.component_names == before.component_names)
+    if not same:
+        sup = pipeline_supports(mesh, state.locator, state.infos)
     st = state.but(mesh=mesh, supports=sup, stage="split")
     st.report["split"] = {"status": res.status, "objective": float(res.objective), "used_mip": bool(res.used_mip),
                           "n_split_edges": int(res.n_split_edges), "seconds": round(res.seconds, 4)}

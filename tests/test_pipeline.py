@@ -377,6 +377,20 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal():
     assert np.array_equal(q.points, keep[0]) and np.array_equal(sup.kind, keep[1]) and np.array_equal(sup.ref, keep[2])
 
 
+@pytest.mark.parametrize("remesh", [True, False])
+def test_split_supports_are_those_of_its_mesh(remesh):
+    """The split stage derives the supports before the LP (for the new midpoints) and again on
+    its result, unless no edge was split (then the mesh, and so its supports, are the same: the
+    remeshed wing here, and the target case); either way they equal supports derived afresh."""
+    from shellmesh_mdao.smooth import pipeline_supports
+    st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="split", remesh=remesh).state
+    assert (st.report["split"]["n_split_edges"] == 0) == remesh
+    again = pipeline_supports(st.mesh, st.locator, st.infos)
+    assert again.n == st.mesh.n_points
+    for name in ("kind", "ref", "comp_kind", "comp_ref", "edge_pairs", "edge_curve"):
+        assert getattr(again, name).tobytes() == getattr(st.supports, name).tobytes(), name
+
+
 def test_merge_keeps_the_split_supports():
     """The merge stage hands on the split stage's supports: merging two triangles of one
     component changes no point, feature edge or fixed vertex, nor any vertex's supports. They are
