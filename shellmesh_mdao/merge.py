@@ -299,7 +299,8 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
     c1, c2, c3 : weights of the length, angle and warping terms of eq. 5 (and of eq. 2
         for the triangles' energy before merging).
     fixed_edges : (k, 2) node pairs never merged; default ``mesh.feature_edges``.
-    time_limit, mip_gap : HiGHS ``time_limit`` (s) and ``mip_rel_gap``.
+    time_limit, mip_gap : HiGHS ``time_limit`` (s; with the valence term, of each of its two
+        solves) and ``mip_rel_gap``.
     min_angle, max_angle : allowed corner angles of a merged quad in degrees (default 20-160:
         a planar quad inside it has scaled Jacobian >= sin 20 deg = 0.34).
     max_dihedral : largest angle (degrees) between the two triangles' normals.

@@ -176,16 +176,20 @@ def test_components_and_feature_data_preserved():
 # ------------------------------------------------------------------ optimality
 def _brute_force(w, f0, f1):
     """Minimum total weight of a matching (edges f0-f1), by enumerating every subset."""
-    k = len(w)
-    if k == 0:
+    if len(w) == 0:
         return 0.0
+    return float(min(0.0, (_matchings(f0, f1) @ w).min()))
+
+
+def _matchings(f0, f1):
+    """Every matching of the edges f0-f1 (no two sharing an end), as 0/1 rows over the edges."""
+    k = len(f0)
     subsets = ((np.arange(2 ** k)[:, None] >> np.arange(k)) & 1).astype(float)
     n = int(max(f0.max(), f1.max())) + 1
     inc = np.zeros((k, n))
     inc[np.arange(k), f0] += 1
     inc[np.arange(k), f1] += 1
-    ok = ((subsets @ inc) <= 1).all(1)
-    return float(min(0.0, (subsets[ok] @ w).min()))
+    return subsets[((subsets @ inc) <= 1).all(1)]
 
 
 @pytest.mark.parametrize("seed", range(40))
@@ -412,14 +416,9 @@ def test_valence_term_brings_interior_vertices_to_valence_four(seed):
 
 
 def _brute_force_valence(w, f0, f1, E, valence, counted, lam):
+    """Minimum over every matching of its weight plus lam |valence - 4| at the counted vertices."""
     k = len(w)
-    subsets = ((np.arange(2 ** k)[:, None] >> np.arange(k)) & 1).astype(float)
-    nt = int(max(f0.max(), f1.max())) + 1
-    inc = np.zeros((k, nt))
-    inc[np.arange(k), f0] += 1
-    inc[np.arange(k), f1] += 1
-    ok = ((subsets @ inc) <= 1).all(1)
-    S = subsets[ok]
+    S = _matchings(f0, f1)
     at = np.zeros((k, len(valence)))
     at[np.arange(k), E[:, 0]] += 1
     at[np.arange(k), E[:, 1]] += 1
