@@ -231,14 +231,20 @@ def _valence_model(E, f0, f1, w, vid, rhs, lam):
     return A, c, lo, hi, ub
 
 
-def _valence_matching(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_limit):
-    """The merges of the valence-aware merge: the LP relaxation of :func:`_valence_model` over
-    every candidate, its integral edges kept, and an exact MIP over its fractional ones (with the
-    kept merges' triangles taken and their valence changes in the right-hand sides). Returns
-    ``(x, objective, status, gap, solve_seconds)``: ``objective`` the weights of the merged edges
-    plus ``lam`` times the counted vertices' summed ``|valence - 4|``; ``gap`` relative to the
-    LP's objective, a lower bound on every matching's (inf when the LP stopped short of its
-    optimum); ``status`` HiGHS's status of the LP, or of the MIP when there was one."""
+#: largest number of candidate edges the valence term's LP takes in one piece (every corpus case:
+#: straight_wing has 24k), and the size of the blocks a larger one is solved in: the dual simplex
+#: grows faster than the problem (cessna210 at 0.25: 15.4k edges 0.2 s, straight_wing 24k 0.4 s;
+#: cessna210 at 0.1, 83k edges: 4.7 s in one piece, 2.0-2.5 s in six blocks, 0.5 % above it)
+VALENCE_ONE_PIECE = 30000
+VALENCE_BLOCK = 16000
+
+
+def _valence_block(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_limit, done):
+    """One block of :func:`_valence_matching`: the LP relaxation over its candidates, the 0/1
+    edges kept, an exact MIP over the fractional rest (the kept merges' triangles taken and their
+    valence changes in the right-hand sides). ``done`` (n_points,) merges already fixed at each
+    vertex (earlier blocks). Returns ``(x, lp_objective, lp_status, status, seconds)``; ``x`` None
+    when the LP found no solution."""
     k = len(w)
 
     def counted(vids):
@@ -249,13 +255,11 @@ def _valence_matching(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time
         return vids, vid
 
     V, vid = counted(E.reshape(-1))
-    A, c, lo, hi, ub = _valence_model(E, f0, f1, w, vid, valence[V] - 4.0, lam)
+    A, c, lo, hi, ub = _valence_model(E, f0, f1, w, vid, valence[V] - 4.0 - done[V], lam)
     sol = _highs_solve(c, A, lo, hi, ub, integer=False, time_limit=time_limit)
     seconds = sol.seconds
     if sol.x is None:
-        x = np.zeros(k)
-        obj = lam * float(np.abs(valence[V] - 4).sum())
-        return x, obj, sol.status + " (no LP solution: nothing merged)", float("inf"), seconds
+        return None, float("nan"), sol.status, sol.status, seconds
     status = sol.status
     x = np.round(sol.x[:k])
     frac = np.abs(sol.x[:k] - x) > 1e-7
@@ -265,10 +269,10 @@ def _valence_matching(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time
     taken[f1[x > 0.5]] = True
     rest = np.flatnonzero(frac & ~taken[f0] & ~taken[f1])
     if len(rest):
-        done = np.bincount(E[x > 0.5].reshape(-1), minlength=n_points)
+        now = done + np.bincount(E[x > 0.5].reshape(-1), minlength=n_points)
         V2, vid2 = counted(E[rest].reshape(-1))
         A2, c2, lo2, hi2, ub2 = _valence_model(E[rest], f0[rest], f1[rest], w[rest], vid2,
-                                               valence[V2] - 4.0 - done[V2], lam)
+                                               valence[V2] - 4.0 - now[V2], lam)
         sub = _highs_solve(c2, A2, lo2, hi2, ub2, integer=True, time_limit=time_limit, mip_gap=0.0)
         seconds += sub.seconds
         status = sub.status
@@ -276,13 +280,67 @@ def _valence_matching(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time
             x[rest] = np.round(sub.x[:len(rest)])
         else:
             status += " (no solution: fractional edges left unmerged)"
-    ends = vid[E[x > 0.5].reshape(-1)]
-    val = valence[V] - np.bincount(ends[ends >= 0], minlength=len(V))
-    obj = float(w @ x) + lam * float(np.abs(val - 4).sum())
-    if sol.status != "Optimal":
-        gap = float("inf")
+    return x, float(sol.objective), sol.status, status, seconds
+
+
+def _valence_matching(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_limit):
+    """The merges of the valence-aware merge (:func:`_valence_block`; in one block up to
+    :data:`VALENCE_ONE_PIECE` candidates, else in blocks of about :data:`VALENCE_BLOCK`, of
+    consecutive triangles of a reverse Cuthill-McKee order of the candidates' triangle graph, each
+    with the merges of the blocks before it fixed). Returns ``(x, objective, status, gap,
+    solve_seconds)``: ``objective`` the weights of the merged edges plus ``lam`` times the counted
+    vertices' summed ``|valence - 4|``;
+    ``gap`` relative to the LP's objective, a lower bound on every matching's (inf when the LP
+    stopped short of its optimum; NaN with more than one block, whose LPs bound nothing together);
+    ``status`` HiGHS's status of the (last block's) MIP, or of its LP when nothing was fractional."""
+    k = len(w)
+    x = np.zeros(k)
+    done = np.zeros(n_points, np.int64)
+    nblocks = 1 if k <= VALENCE_ONE_PIECE else -(-k // VALENCE_BLOCK)
+    if nblocks == 1:
+        blocks = [np.arange(k)]
     else:
-        gap = 0.0 if obj <= sol.objective else (obj - sol.objective) / max(abs(obj), 1e-300)
+        from scipy.sparse.csgraph import reverse_cuthill_mckee
+        G = sparse.csr_matrix((np.ones(2 * k), (np.concatenate([f0, f1]), np.concatenate([f1, f0]))),
+                              shape=(n_faces, n_faces))
+        rank = np.empty(n_faces, np.int64)
+        rank[reverse_cuthill_mckee(G, symmetric_mode=True)] = np.arange(n_faces)
+        last = np.maximum(rank[f0], rank[f1])             # an edge joins the block of its later triangle
+        cuts = np.quantile(last, np.linspace(0, 1, nblocks + 1)[1:-1], method="lower")
+        which = np.searchsorted(cuts, last, side="left")
+        blocks = [np.flatnonzero(which == b) for b in range(nblocks)]
+    taken = np.zeros(n_faces, bool)
+    lp_obj, lp_status, status, seconds = 0.0, "Optimal", "Optimal", 0.0
+    for idx in blocks:
+        idx = idx[~taken[f0[idx]] & ~taken[f1[idx]]]
+        if not len(idx):
+            continue
+        xb, ob, ls, st, sec = _valence_block(E[idx], f0[idx], f1[idx], w[idx], n_points, n_faces, valence, vmask,
+                                             lam, time_limit, done)
+        seconds += sec
+        status = st
+        if xb is None:
+            lp_status = ls
+            status = ls + " (no LP solution: nothing merged in a block)"
+            continue
+        lp_obj += ob
+        if ls != "Optimal":
+            lp_status = ls
+        x[idx] = xb
+        m = idx[xb > 0.5]
+        taken[f0[m]] = True
+        taken[f1[m]] = True
+        done += np.bincount(E[m].reshape(-1), minlength=n_points)
+    V = np.unique(E.reshape(-1))
+    V = V[vmask[V]]
+    obj = float(w @ x) + lam * float(np.abs(valence[V] - done[V] - 4).sum())
+    if lp_status != "Optimal":
+        gap = float("inf")
+    elif len(blocks) > 1:
+        gap = float("nan")
+        status += f" ({len(blocks)} blocks)"
+    else:
+        gap = 0.0 if obj <= lp_obj else (obj - lp_obj) / max(abs(obj), 1e-300)
     return x, obj, status, gap, seconds
 
 

@@ -483,3 +483,25 @@ def test_valence_merge_rounds_an_odd_cycle():
 def test_valence_weight_must_be_a_non_negative_number():
     with pytest.raises(ValueError, match="valence_weight"):
         merge_triangles(ShellMesh(*_delaunay_patch(0)), valence_weight=-1.0)
+
+
+def test_valence_merge_in_blocks(monkeypatch):
+    # a problem above VALENCE_ONE_PIECE candidates is solved in blocks (the dual simplex grows
+    # faster than the problem), each with the merges before it fixed: still a valid matching, the
+    # same every time, close to the one-piece objective; no global bound, so the gap is NaN
+    import shellmesh_mdao.merge as M
+    mesh = ShellMesh(*_delaunay_patch(2))
+    one, r1 = merge_triangles(mesh, merge_bonus=1.0, valence_weight=0.5)
+    monkeypatch.setattr(M, "VALENCE_ONE_PIECE", 100)
+    monkeypatch.setattr(M, "VALENCE_BLOCK", 60)
+    out, res = merge_triangles(mesh, merge_bonus=1.0, valence_weight=0.5)
+    again, _ = merge_triangles(mesh, merge_bonus=1.0, valence_weight=0.5)
+    out.validate()
+    assert np.array_equal(out.faces, again.faces)
+    assert res.status.endswith("blocks)") and int(res.status.split("(")[-1].split()[0]) >= 3
+    assert np.isnan(res.mip_gap) and r1.mip_gap <= 0.01
+    assert res.objective >= r1.objective * (1 + r1.mip_gap) - 1e-9      # the LP bound holds for it too
+    assert res.objective <= 0.9 * r1.objective                          # and it is not far off
+    inner = M.interior_vertices(mesh)
+    vo = _merged_valence(out)[inner]
+    assert (vo == 4).sum() >= 0.75 * len(inner)
