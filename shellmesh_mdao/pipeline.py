@@ -437,7 +437,9 @@ def stage_merge(state: PipelineState) -> PipelineState:
             and mesh.component_names == before.component_names)
     sup = state.supports if same else pipeline_supports(mesh, state.locator, state.infos)
     st = state.but(mesh=mesh, supports=sup, stage="merge")
-    st.report["merge"] = {"status": res.status, "objective": float(res.objective), "mip_gap": float(res.mip_gap),
+    # a gap that is not a number (no bound: the valence term in blocks; a solve cut short) is null
+    gap = float(res.mip_gap) if np.isfinite(res.mip_gap) else None
+    st.report["merge"] = {"status": res.status, "objective": float(res.objective), "mip_gap": gap,
                           "n_merged": int(res.n_merged), "n_candidates": int(res.n_candidates),
                           "quad_fraction": round(float(res.quad_fraction), 4), "seconds": round(res.seconds, 4),
                           "solve_seconds": round(res.solve_seconds, 4), "valence_weight": o.merge_valence_weight}

@@ -391,6 +391,21 @@ def test_split_supports_are_those_of_its_mesh(remesh):
         assert getattr(again, name).tobytes() == getattr(st.supports, name).tobytes(), name
 
 
+def test_merge_report_is_strict_json_without_a_gap(monkeypatch):
+    """With the merge's valence term in blocks (a problem above merge.VALENCE_ONE_PIECE candidate
+    edges) there is no global bound: the report's gap is null, not NaN, so the JSON report stays
+    standard JSON."""
+    import json
+
+    import shellmesh_mdao.merge as M
+    st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="split").state
+    monkeypatch.setattr(M, "VALENCE_ONE_PIECE", 500)
+    monkeypatch.setattr(M, "VALENCE_BLOCK", 400)
+    rep = pl.run_stage(st, "merge").report["merge"]
+    assert rep["status"].endswith("blocks)") and rep["mip_gap"] is None and rep["n_merged"] > 0
+    json.dumps(rep, allow_nan=False)
+
+
 def test_merge_keeps_the_split_supports():
     """The merge stage hands on the split stage's supports: merging two triangles of one
     component changes no point, feature edge or fixed vertex, nor any vertex's supports. They are
