@@ -84,7 +84,7 @@ class PipelineOptions:
                           merge's objective (:func:`~shellmesh_mdao.merge.merge_triangles`'s
                           ``valence_weight``): the subdivided quads around a node of valence 3, 5
                           or 6 cannot all be square. Default 0.5 (the corpus's skin mean scaled
-                          Jacobian +0.003 to +0.007, docs/benchmarks.md); 0 turns it off.
+                          Jacobian +0.004 to +0.008, docs/benchmarks.md); 0 turns it off.
     ``smooth_iterations`` trust-region steps of the smoothing QP before subdivision (default 10);
                           ``final_iterations`` after it (default 8), ``final_warp_iterations`` in
                           the second final pass with the quad planarity term (default 10; see
