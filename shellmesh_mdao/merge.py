@@ -203,6 +203,28 @@ def interior_vertices(mesh: ShellMesh) -> np.ndarray:
     return np.flatnonzero(out)
 
 
+def _matching_rows(f0, f1, n_cols):
+    """The rows ``A x <= 1`` of a matching over edges ``f0``-``f1`` (columns 0..k-1 of
+    ``n_cols``): one row per triangle with two or more candidate edges, in triangle order (a
+    triangle with one is held by the edge's upper bound 1)."""
+    k = len(f0)
+    tri_ids = np.concatenate([f0, f1])
+    col = np.concatenate([np.arange(k), np.arange(k)])
+    sel = np.bincount(tri_ids)[tri_ids] >= 2
+    need, row = np.unique(tri_ids[sel], return_inverse=True)
+    return sparse.csr_matrix((np.ones(int(sel.sum())), (row.reshape(-1), col[sel])), shape=(len(need), n_cols))
+
+
+def _counted(vids, vmask, n_points):
+    """The vertices among ``vids`` that ``vmask`` counts (sorted, once each) and their numbering
+    (n_points,), -1 for the others."""
+    vids = np.unique(vids)
+    vids = vids[vmask[vids]]
+    vid = np.full(n_points, -1, np.int64)
+    vid[vids] = np.arange(len(vids))
+    return vids, vid
+
+
 def _valence_model(E, f0, f1, w, vid, rhs, lam):
     """The LP/MIP of the valence-aware merge over candidate edges ``E`` (k, 2) between the
     triangles ``f0``/``f1`` with weights ``w``: columns ``x`` (k), then ``p``, ``q`` (nv each);
@@ -210,12 +232,9 @@ def _valence_model(E, f0, f1, w, vid, rhs, lam):
     counted vertex ``v`` (``vid[v] >= 0``) ``sum_{e at v} x_e + p_v - q_v = rhs_v`` (its valence
     in the merged mesh minus 4 is ``q_v - p_v``); cost ``w x + lam (p + q)``."""
     k, nv = len(w), len(rhs)
-    tri_ids = np.concatenate([f0, f1])
+    A1 = _matching_rows(f0, f1, k + 2 * nv)
+    nr = A1.shape[0]
     col = np.concatenate([np.arange(k), np.arange(k)])
-    cnt = np.bincount(tri_ids)
-    sel = cnt[tri_ids] >= 2
-    need, tinv = np.unique(tri_ids[sel], return_inverse=True)
-    A1 = sparse.csr_matrix((np.ones(int(sel.sum())), (tinv, col[sel])), shape=(len(need), k + 2 * nv))
     ev = np.concatenate([E[:, 0], E[:, 1]])
     ok = vid[ev] >= 0
     rv, cv = vid[ev[ok]], col[ok]
@@ -224,8 +243,8 @@ def _valence_model(E, f0, f1, w, vid, rhs, lam):
                              np.concatenate([cv, k + np.arange(nv), k + nv + np.arange(nv)]))),
                            shape=(nv, k + 2 * nv))
     A = sparse.vstack([A1, Bv]).tocsr()
-    lo = np.concatenate([np.full(len(need), -np.inf), rhs])
-    hi = np.concatenate([np.ones(len(need)), rhs])
+    lo = np.concatenate([np.full(nr, -np.inf), rhs])
+    hi = np.concatenate([np.ones(nr), rhs])
     c = np.concatenate([w, np.full(2 * nv, float(lam))])
     ub = np.concatenate([np.ones(k), np.full(2 * nv, np.inf)])
     return A, c, lo, hi, ub
@@ -246,15 +265,7 @@ def _valence_block(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_li
     vertex (earlier blocks). Returns ``(x, lp_objective, lp_status, status, seconds)``; ``x`` None
     when the LP found no solution."""
     k = len(w)
-
-    def counted(vids):
-        vids = np.unique(vids)
-        vids = vids[vmask[vids]]
-        vid = np.full(n_points, -1, np.int64)
-        vid[vids] = np.arange(len(vids))
-        return vids, vid
-
-    V, vid = counted(E.reshape(-1))
+    V, vid = _counted(E.reshape(-1), vmask, n_points)
     A, c, lo, hi, ub = _valence_model(E, f0, f1, w, vid, valence[V] - 4.0 - done[V], lam)
     sol = _highs_solve(c, A, lo, hi, ub, integer=False, time_limit=time_limit)
     seconds = sol.seconds
@@ -270,7 +281,7 @@ def _valence_block(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_li
     rest = np.flatnonzero(frac & ~taken[f0] & ~taken[f1])
     if len(rest):
         now = done + np.bincount(E[x > 0.5].reshape(-1), minlength=n_points)
-        V2, vid2 = counted(E[rest].reshape(-1))
+        V2, vid2 = _counted(E[rest].reshape(-1), vmask, n_points)
         A2, c2, lo2, hi2, ub2 = _valence_model(E[rest], f0[rest], f1[rest], w[rest], vid2,
                                                valence[V2] - 4.0 - now[V2], lam)
         sub = _highs_solve(c2, A2, lo2, hi2, ub2, integer=True, time_limit=time_limit, mip_gap=0.0)
@@ -331,8 +342,7 @@ def _valence_matching(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time
         taken[f0[m]] = True
         taken[f1[m]] = True
         done += np.bincount(E[m].reshape(-1), minlength=n_points)
-    V = np.unique(E.reshape(-1))
-    V = V[vmask[V]]
+    V, _ = _counted(E.reshape(-1), vmask, n_points)
     obj = float(w @ x) + lam * float(np.abs(valence[V] - done[V] - 4).sum())
     if lp_status != "Optimal":
         gap = float("inf")
@@ -424,21 +434,13 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
         ridx = np.flatnonzero(rest)
         if len(ridx):
             r0, r1, rw = f0[ridx], f1[ridx], w[ridx]
-            # rows: triangles with >= 2 remaining edges (one-entry rows are implied by ub = 1)
-            tri_ids = np.concatenate([r0, r1])
-            col = np.concatenate([np.arange(len(ridx)), np.arange(len(ridx))])
-            cnt = np.bincount(tri_ids, minlength=m)
-            sel = cnt[tri_ids] >= 2
-            need = np.flatnonzero(cnt >= 2)
-            rows_of = np.full(m, -1, dtype=np.int64)
-            rows_of[need] = np.arange(len(need))
-            if len(need) == 0:
+            A = _matching_rows(r0, r1, len(ridx))
+            nr = A.shape[0]
+            if nr == 0:
                 x[ridx] = 1.0
             else:
-                A = sparse.csr_matrix((np.ones(int(sel.sum())), (rows_of[tri_ids[sel]], col[sel])),
-                                      shape=(len(need), len(ridx)))
                 start = _greedy_matching(r0, r1, rw, m)
-                sol = _highs_solve(rw, A, np.full(len(need), -np.inf), np.ones(len(need)),
+                sol = _highs_solve(rw, A, np.full(nr, -np.inf), np.ones(nr),
                                    np.ones(len(ridx)), integer=True, time_limit=time_limit,
                                    mip_gap=mip_gap, start=start, presolve=False)
                 solve_s = sol.seconds

@@ -384,6 +384,17 @@ def stage_members(state: PipelineState) -> PipelineState:
     return st
 
 
+def _supports_hold(before: ShellMesh, after: ShellMesh) -> bool:
+    """Whether a stage's result keeps what the node supports are derived from: the points,
+    feature edges (and their ids), fixed vertices and component names (with the same faces and
+    components too, the split stage's; the merge changes faces only within a component)."""
+    return (np.array_equal(after.points, before.points)
+            and np.array_equal(after.feature_edges, before.feature_edges)
+            and np.array_equal(after.feature_edge_ids, before.feature_edge_ids)
+            and np.array_equal(after.fixed_vertices, before.fixed_vertices)
+            and after.component_names == before.component_names)
+
+
 def stage_split(state: PipelineState) -> PipelineState:
     """Splitting LP (paper eq. 1-3) on the whole mesh; chains, junctions and feature lines are
     never split. Derives the node supports (input skin, member planes, feature curves)."""
@@ -396,13 +407,8 @@ def stage_split(state: PipelineState) -> PipelineState:
     mesh, res = split_polygons(before, time_limit=state.options.split_time_limit,
                                project=edge_midpoint_projector(before, sup))
     # where no edge was split (the target case) the mesh is the same and so are its supports
-    same = (np.array_equal(mesh.points, before.points) and np.array_equal(mesh.faces, before.faces)
-            and np.array_equal(mesh.component, before.component)
-            and np.array_equal(mesh.feature_edges, before.feature_edges)
-            and np.array_equal(mesh.feature_edge_ids, before.feature_edge_ids)
-            and np.array_equal(mesh.fixed_vertices, before.fixed_vertices)
-            and mesh.component_names == before.component_names)
-    if not same:
+    if not (_supports_hold(before, mesh) and np.array_equal(mesh.faces, before.faces)
+            and np.array_equal(mesh.component, before.component)):
         sup = pipeline_supports(mesh, state.locator, state.infos)
     st = state.but(mesh=mesh, supports=sup, stage="split")
     st.report["split"] = {"status": res.status, "objective": float(res.objective), "used_mip": bool(res.used_mip),
@@ -428,13 +434,7 @@ def stage_merge(state: PipelineState) -> PipelineState:
     # a merge joins two triangles of one component across an edge that is no feature edge: no
     # point, feature edge or fixed vertex changes, nor any vertex's set of incident supports, so
     # the split stage's supports hold as they are (the same arrays as deriving them again)
-    before = state.mesh
-    same = (state.supports is not None and state.supports.n == mesh.n_points
-            and np.array_equal(mesh.points, before.points)
-            and np.array_equal(mesh.feature_edges, before.feature_edges)
-            and np.array_equal(mesh.feature_edge_ids, before.feature_edge_ids)
-            and np.array_equal(mesh.fixed_vertices, before.fixed_vertices)
-            and mesh.component_names == before.component_names)
+    same = state.supports is not None and state.supports.n == mesh.n_points and _supports_hold(state.mesh, mesh)
     sup = state.supports if same else pipeline_supports(mesh, state.locator, state.infos)
     st = state.but(mesh=mesh, supports=sup, stage="merge")
     # a gap that is not a number (no bound: the valence term in blocks; a solve cut short) is null
