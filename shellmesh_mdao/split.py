@@ -253,11 +253,14 @@ def _highs_core(highspy):
 
 def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, time_limit: float,
                  mip_gap: float | None = None, start: np.ndarray | None = None,
-                 presolve: bool | None = None) -> _Solve:
+                 presolve: bool | None = None, basis: tuple | None = None) -> _Solve:
     """Solve ``min c^T x, row_lo <= A x <= row_hi, 0 <= x <= ub`` with HiGHS.
 
     ``presolve``: HiGHS's presolve on or off; default (None) off for an LP and HiGHS's
     choice for a MIP.
+    ``basis``: for an LP, ``(basic columns, basic rows)`` (two bool masks, as many basic as
+    there are rows, the basis matrix nonsingular): the simplex starts from it, every other
+    column at its lower bound and every other row at its lower side.
 
     The model is passed in one piece (HighsLp, row-wise CSR).  Returns the primal
     solution (None when HiGHS found none), HiGHS's model-status string, objective,
@@ -307,6 +310,15 @@ def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, 
         sol.col_value = np.asarray(start, dtype=np.float64)
         sol.value_valid = True
         h.setSolution(sol)
+    if basis is not None and not integer:
+        col_basic, row_basic = basis
+        status_of = np.array([highspy.HighsBasisStatus.kLower, highspy.HighsBasisStatus.kBasic], dtype=object)
+        b = highspy.HighsBasis()
+        b.col_status = status_of[np.asarray(col_basic, bool).astype(np.intp)].tolist()
+        b.row_status = status_of[np.asarray(row_basic, bool).astype(np.intp)].tolist()
+        b.valid = True
+        if h.setBasis(b) == highspy.HighsStatus.kError:
+            raise SolverError("HiGHS rejected the starting basis (internal error); report this with the input mesh")
     h.run()
     ms = h.getModelStatus()
     status = h.modelStatusToString(ms)
@@ -469,7 +481,8 @@ def split_polygons(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_e
     Returns the split mesh (input nodes keep their indices; new nodes are appended in order
     of their edge's sorted node pair; the children of a face replace it in place, in
     option-table order) and a :class:`SplitResult`.  If HiGHS finds no solution within the
-    time limit, every polygon is kept and ``status`` says so.
+    time limit, every polygon is kept and ``status`` says so (the LP starts from keeping every
+    polygon, so at its time limit it has a feasible vertex, no worse than that, to hand back).
     """
     t0 = time.perf_counter()
     if not isinstance(mesh, ShellMesh):
@@ -487,7 +500,13 @@ def split_polygons(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_e
     status = "Optimal"
     x = keep_x
     if m:
-        sol = _highs_solve(c[act], A_act, lp.rhs, lp.rhs, lp.ub[act], integer=False, time_limit=time_limit)
+        # the simplex starts from the basis of keeping every polygon (its keep option basic in
+        # its row, every agreement row's slack basic): a feasible vertex a few dozen pivots from
+        # the optimum on the corpus, where from HiGHS's own start it took one per polygon
+        # (12,178 on the target case; 0.21 -> 0.09 s, the same solution)
+        row_basic = np.arange(lp.A.shape[0]) >= lp.n_choice_rows
+        sol = _highs_solve(c[act], A_act, lp.rhs, lp.rhs, lp.ub[act], integer=False, time_limit=time_limit,
+                           basis=(keep_x[act] > 0, row_basic))
         lp_s, status = sol.seconds, sol.status
         if sol.x is None:
             status += " (no LP solution: kept all polygons)"

@@ -296,11 +296,19 @@ def test_mip_path_gives_the_same_optimum():
     assert_conforming(out_mip)
 
 
-def test_time_limit_keeps_every_polygon(geometry_dir):
+def test_time_limit_gives_a_feasible_split_no_worse_than_keeping(geometry_dir):
+    """Stopped at the time limit, the LP (started from keeping every polygon) hands back its
+    last feasible vertex: a conforming split whose energy is at most that of keeping all."""
+    from shellmesh_mdao import split as sp
+
     mesh = _corpus_mesh(geometry_dir, "swept_wing")
     out, res = split_polygons(mesh, time_limit=1e-6)
-    assert "Time limit" in res.status and "kept all polygons" in res.status
-    assert np.array_equal(out.faces, mesh.faces) and res.n_split_edges == 0
+    assert "Time limit" in res.status
+    assert_conforming(out)
+    lp = build_split_lp(mesh)
+    keep = np.zeros(lp.energy.shape)
+    keep[np.arange(mesh.n_faces), sp._KEEP[lp.kind]] = 1.0
+    assert res.objective <= float(lp.c @ keep.ravel()) + 1e-9
 
 
 def _corpus_mesh(geometry_dir, name, feature_deg=30.0):
@@ -399,3 +407,47 @@ def test_highs_mip_with_start_skips_feasibility_jump_and_stays_optimal(monkeypat
     set_calls.clear()
     sp._highs_solve(w, A, np.full(6, -np.inf), np.ones(6), np.ones(len(edges)), integer=True, time_limit=10.0)
     assert not [c for c in set_calls if c[0] == "mip_heuristic_run_feasibility_jump"]
+
+
+def test_lp_starts_from_keeping_every_polygon_and_reaches_the_cold_optimum(monkeypatch):
+    """The split LP's simplex starts from the basis of keeping every polygon (HiGHS accepts it):
+    on a mesh where a few polygons want splitting it takes a few pivots instead of about one
+    per polygon, and ends at the optimum HiGHS reaches from its own start."""
+    import highspy
+
+    from shellmesh_mdao import split as sp
+
+    runs = []
+    base = sp._highs_core(highspy)
+
+    class Recording(base):
+        basis_status = None
+
+        def setBasis(self, b):
+            self.basis_status = super().setBasis(b)
+            return self.basis_status
+
+        def run(self):
+            status = super().run()
+            runs.append((self.basis_status, self.getInfo().simplex_iteration_count))
+            return status
+
+    monkeypatch.setattr(sp, "_highs_core", lambda hp: Recording)
+    rng = np.random.default_rng(3)
+    # a jittered 12 x 12 grid of quads with two columns stretched to 4:1: their quads gain
+    # from a split, the others are best kept
+    pts, f = _grid(12, 12, 1.0, 1.0)
+    pts[:, :2] += rng.uniform(-0.1, 0.1, (len(pts), 2))
+    pts[:, 0] += 3.0 * (pts[:, 0] > 4.5) + 3.0 * (pts[:, 0] > 7.5)
+    mesh = ShellMesh(pts, f)
+    out, res = split_polygons(mesh)
+    assert res.status == "Optimal" and not res.used_mip and res.n_split_edges > 0
+    assert_conforming(out)
+    (warm_status, warm_its), = runs
+    assert warm_status == highspy.HighsStatus.kOk
+    lp = build_split_lp(mesh)
+    act = np.flatnonzero(lp.ub > 0)
+    cold = sp._highs_solve(lp.c[act], lp.A[:, act], lp.rhs, lp.rhs, lp.ub[act], integer=False, time_limit=10.0)
+    cold_its = runs[-1][1]
+    assert res.objective == pytest.approx(cold.objective, rel=1e-12)
+    assert warm_its < cold_its / 3, (warm_its, cold_its)
