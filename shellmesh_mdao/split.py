@@ -481,8 +481,9 @@ def split_polygons(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_e
     Returns the split mesh (input nodes keep their indices; new nodes are appended in order
     of their edge's sorted node pair; the children of a face replace it in place, in
     option-table order) and a :class:`SplitResult`.  If HiGHS finds no solution within the
-    time limit, every polygon is kept and ``status`` says so (the LP starts from keeping every
-    polygon, so at its time limit it has a feasible vertex, no worse than that, to hand back).
+    time limit, every polygon is kept and ``status`` says so. (The LP starts from keeping every
+    polygon, so at its time limit it has a feasible vertex; that vertex is used if it is no
+    worse than keeping every polygon, else every polygon is kept.)
     """
     t0 = time.perf_counter()
     if not isinstance(mesh, ShellMesh):
@@ -510,6 +511,10 @@ def split_polygons(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_e
         lp_s, status = sol.seconds, sol.status
         if sol.x is None:
             status += " (no LP solution: kept all polygons)"
+            integral = False
+        elif status != "Optimal" and float(c[act] @ sol.x) > float(c @ keep_x):
+            # stopped short (time limit) at a vertex worse than keeping every polygon
+            status += " (LP stopped above keeping all polygons: kept all polygons)"
             integral = False
         else:
             x = np.zeros(nvar)

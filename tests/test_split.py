@@ -451,3 +451,25 @@ def test_lp_starts_from_keeping_every_polygon_and_reaches_the_cold_optimum(monke
     cold_its = runs[-1][1]
     assert res.objective == pytest.approx(cold.objective, rel=1e-12)
     assert warm_its < cold_its / 3, (warm_its, cold_its)
+
+
+def test_time_limited_lp_vertex_worse_than_keeping_is_not_used(monkeypatch):
+    """Should the LP stop at its time limit on a vertex of higher energy than keeping every
+    polygon, every polygon is kept and the status says why."""
+    from shellmesh_mdao import split as sp
+
+    pts, f = _grid(3, 3, 1.0, 1.0)
+    mesh = ShellMesh(pts, f)
+    real = sp._highs_solve
+
+    def stopped(c, *a, **k):
+        sol = real(c, *a, **k)
+        worse = np.zeros_like(sol.x)
+        worse[np.argmax(c)] = 1.0                  # costlier than the optimum, kept or not
+        assert c @ worse > sol.objective
+        return sp._Solve(worse, "Time limit reached", float(c @ worse), 0.0, sol.seconds)
+
+    monkeypatch.setattr(sp, "_highs_solve", stopped)
+    out, res = split_polygons(mesh)
+    assert "Time limit" in res.status and "kept all polygons" in res.status
+    assert np.array_equal(out.faces, mesh.faces) and res.n_split_edges == 0
