@@ -23,6 +23,7 @@ setup(
         "pyvista>=0.43",
         "highspy>=1.7",
         "qdldl>=0.1.9",
+        "threadpoolctl>=3.1",
         "meshio>=5.3",
         "pyNastran>=1.4",
         "pyyaml>=6.0",

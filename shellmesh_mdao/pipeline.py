@@ -232,8 +232,24 @@ class PipelineResult:
     state: PipelineState | None = None
 
 
+@contextmanager
+def one_blas_thread():
+    """BLAS (numpy's and scipy's OpenBLAS, any other threadpoolctl finds) on one thread inside
+    the block, the caller's setting restored after. The stages' dense products are small (3 x 3
+    frames, a few columns), where OpenBLAS's worker threads mostly spin-wait between calls: on
+    the target case they took 0.6-0.8 s of CPU a run (system time) and the second core from the
+    closest-point queries and the trust-radius tree, and from a second pipeline process beside it
+    (docs/benchmarks.md, thirteenth pass). The results do not depend on it: the determinism test
+    runs one process with one BLAS thread and another with the default."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
 class _Stages:
-    """Times stages and shows a spinner on a terminal for stages longer than a second."""
+    """Times stages (each with BLAS on one thread: :func:`one_blas_thread`) and shows a spinner
+    on a terminal for stages longer than a second."""
 
     def __init__(self, progress: bool):
         self.progress = progress and sys.stderr.isatty()
@@ -248,7 +264,8 @@ class _Stages:
             status = Console(stderr=True).status(f"[bold]{name}[/bold] ...")
             status.start()
         try:
-            yield
+            with one_blas_thread():
+                yield
         finally:
             if status is not None:
                 status.stop()

@@ -485,3 +485,34 @@ def test_explicit_members_to_all_quads():
     names = {res.mesh.component_names[i].split("/seg_")[0] for i in np.unique(res.mesh.component)}
     explicit = {m.name for m in res.layout.members() if m.kind == "explicit"}
     assert explicit and explicit <= names
+
+
+def test_stages_run_with_one_blas_thread_and_restore_the_callers(monkeypatch):
+    """Every stage runs with BLAS on one thread (its small products only spin OpenBLAS's workers,
+    which took the second core from the closest-point threads); the caller's thread count is
+    back after the stage, also when the stage raises."""
+    import types
+
+    import scipy.sparse.linalg  # noqa: F401 -- scipy's own OpenBLAS loaded too
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads():
+        return sorted(d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas")
+
+    seen = []
+
+    def stage(state):
+        seen.append(blas_threads())
+        if state is None:
+            raise ShellMeshError("bad input")
+        return types.SimpleNamespace(report={"stages": {}})
+
+    monkeypatch.setitem(pl._STAGE_FUNCS, "project", stage)
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        assert before and max(before) == 2
+        pl.run_stage(object(), "project")
+        with pytest.raises(ShellMeshError):
+            pl.run_stage(None, "project")
+        assert blas_threads() == before
+    assert seen == [[1] * len(before)] * 2
