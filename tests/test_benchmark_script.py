@@ -166,3 +166,52 @@ def test_robustness_section_counts_the_runs_meeting_each_target():
     assert cells[col["warp_p99"]] == "9.50–10.40; 1/3"
     assert cells[col["quad_percent"]] == "100.00; 2/3"
     assert cells[-3:] == ["1/3", "1/2", "3.0–4.0"]
+
+
+def _fake_case(k, wall, gwall, status="ok"):
+    """A compare_case result with wall times ``wall`` (ours) and ``gwall`` (Gmsh); CPU = 1.5 x wall."""
+    o = {"status": status, "wall_s": wall, "cpu_s": 1.5 * wall, "peak_rss_mb": 300.0, "second_pass": False,
+         "stages": {"remesh": 0.7, "quad": 0.9}, "figures": {"n_elements": 25_000}}
+    g = {"status": "ok", "wall_s": gwall, "cpu_s": 1.5 * gwall, "peak_rss_mb": 200.0, "figures": {"n_elements": 18_000}}
+    ok = status == "ok"
+    return {"name": "cessna210", "size": 0.25, "ribs_per_wing": 12, "spars": [0.15, 0.65], "load_before": 1.0 + k,
+            "load_after": 1.5 + k, "gmsh": g, "ours": o, "time_ratio": wall / gwall if ok else None,
+            "cpu_ratio": wall / gwall if ok else None, "targets": None}
+
+
+def test_perf_pairs_verdict_on_the_median_of_the_pair_ratios(monkeypatch):
+    """The performance case as side-by-side pairs: every pair is run and listed, the first pair's
+    result (figures, stages) is kept, the verdict is on the median of the pairs' wall-time ratios
+    (not on one pair, nor on a ratio of medians), and a pair in which the pipeline failed is
+    listed but does not count."""
+    walls = [(3.0, 2.0), (2.4, 2.6), (2.5, 2.4), (9.9, 1.0), (2.0, 2.5)]
+    calls = []
+
+    def fake(surface, manifest, name, size, ribs, spars, **kw):
+        k = len(calls)
+        calls.append(k)
+        return _fake_case(k, *walls[k], status="error" if k == 3 else "ok")
+
+    monkeypatch.setattr(B, "compare_case", fake)
+    p = B.perf_pairs("x.stl", {}, "cessna210", 0.25, 12, pairs=5)
+    assert calls == [0, 1, 2, 3, 4] and p["ours"]["wall_s"] == 3.0 and len(p["pairs"]) == 5
+    assert p["pairs"][3]["status"] == "error" and p["pairs"][3]["time_ratio"] is None
+    ratios = sorted(w / g for i, (w, g) in enumerate(walls) if i != 3)     # 0.8, 0.923, 1.042, 1.5
+    med = p["median"]
+    assert med["n"] == 4 and med["time_ratio"] == pytest.approx(0.5 * (ratios[1] + ratios[2]))
+    assert med["time_ratio_range"] == pytest.approx([ratios[0], ratios[-1]])
+    assert med["wall_s"] == pytest.approx(2.45) and med["gmsh_wall_s"] == pytest.approx(2.45)
+    res = {"machine": {"cpus": 2, "memory_gb": 24, "python": "3.11", "numpy": "1", "scipy": "1", "trimesh": "1",
+                       "gmsh": "4"}, "started": "now", "load_start": 1.0, "load_end": 1.0, "total_s": 60.0,
+           "corpus": [], "performance": p}
+    page = B.render_page(res)
+    assert "5 such pairs" in page and "| median (4 of 5) |" in page and "| 4 | error |" in page
+    assert f"Result: **met** — median over 4 pairs" in page          # median ratio 0.98 < 1
+    # the same pairs with the last one slower: the median ratio goes above 1, not met
+    walls[4] = (2.8, 2.5)
+    calls.clear()
+    p2 = B.perf_pairs("x.stl", {}, "cessna210", 0.25, 12, pairs=5)
+    assert p2["median"]["time_ratio"] > 1
+    assert "Result: **not met**" in B.render_page(dict(res, performance=p2))
+    with pytest.raises(ValueError, match="at least one pair"):
+        B.perf_pairs("x.stl", {}, "cessna210", 0.25, 12, pairs=0)
