@@ -763,15 +763,16 @@ def render_page(res: dict, keep: str = "") -> str:
             L.append(f"| {k} | {ow} | {_f(r.get('cpu_s'), '{:.2f}')} | {gw} | {_f(r.get('gmsh_cpu_s'), '{:.2f}')} | "
                      f"{_f(r.get('time_ratio'), '{:.2f}')} | {_f(r.get('cpu_ratio'), '{:.2f}')} | "
                      f"{_f(r.get('load_before'), '{:.1f}')} / {_f(r.get('load_after'), '{:.1f}')} |")
-        L.append(f"| median ({med['n']} of {len(rows)}) | {_f(med['wall_s'], '{:.2f}')} | {_f(med['cpu_s'], '{:.2f}')} | "
+        L.append(f"| median ({med['n']} of {len(rows)}) | {_f(med['wall_s'], '{:.2f}')} | "
+                 f"{_f(med['cpu_s'], '{:.2f}')} | "
                  f"{_f(med['gmsh_wall_s'], '{:.2f}')} | {_f(med['gmsh_cpu_s'], '{:.2f}')} | "
                  f"{_f(med['time_ratio'], '{:.2f}')} | {_f(med['cpu_ratio'], '{:.2f}')} | |")
         L.append("")
         if med["time_ratio"] is not None:
             met = med["time_ratio"] < 1.0
             lo, hi = med["time_ratio_range"]
-            L += [f"Result: **{'met' if met else 'not met'}** — median over {med['n']} pair{'s' if med['n'] != 1 else ''}: "
-                  "the pipeline "
+            plural = "s" if med["n"] != 1 else ""
+            L += [f"Result: **{'met' if met else 'not met'}** — median over {med['n']} pair{plural}: the pipeline "
                   f"{med['wall_s']:.2f} s ({med['cpu_s']:.2f} s CPU) for "
                   f"{_i((o.get('figures') or {}).get('n_elements'))} quads of skin and members, Gmsh "
                   f"{med['gmsh_wall_s']:.2f} s ({med['gmsh_cpu_s']:.2f} s CPU) for "

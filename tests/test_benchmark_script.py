@@ -172,7 +172,8 @@ def _fake_case(k, wall, gwall, status="ok"):
     """A compare_case result with wall times ``wall`` (ours) and ``gwall`` (Gmsh); CPU = 1.5 x wall."""
     o = {"status": status, "wall_s": wall, "cpu_s": 1.5 * wall, "peak_rss_mb": 300.0, "second_pass": False,
          "stages": {"remesh": 0.7, "quad": 0.9}, "figures": {"n_elements": 25_000}}
-    g = {"status": "ok", "wall_s": gwall, "cpu_s": 1.5 * gwall, "peak_rss_mb": 200.0, "figures": {"n_elements": 18_000}}
+    g = {"status": "ok", "wall_s": gwall, "cpu_s": 1.5 * gwall, "peak_rss_mb": 200.0,
+         "figures": {"n_elements": 18_000}}
     ok = status == "ok"
     return {"name": "cessna210", "size": 0.25, "ribs_per_wing": 12, "spars": [0.15, 0.65], "load_before": 1.0 + k,
             "load_after": 1.5 + k, "gmsh": g, "ours": o, "time_ratio": wall / gwall if ok else None,
@@ -206,7 +207,7 @@ def test_perf_pairs_verdict_on_the_median_of_the_pair_ratios(monkeypatch):
            "corpus": [], "performance": p}
     page = B.render_page(res)
     assert "5 such pairs" in page and "| median (4 of 5) |" in page and "| 4 | error |" in page
-    assert f"Result: **met** — median over 4 pairs" in page          # median ratio 0.98 < 1
+    assert "Result: **met** — median over 4 pairs" in page          # median ratio 0.98 < 1
     # the same pairs with the last one slower: the median ratio goes above 1, not met
     walls[4] = (2.8, 2.5)
     calls.clear()

@@ -510,7 +510,8 @@ def test_stages_run_with_one_blas_thread_and_restore_the_callers(monkeypatch):
     monkeypatch.setitem(pl._STAGE_FUNCS, "project", stage)
     with threadpool_limits(limits=2, user_api="blas"):
         before = blas_threads()
-        assert before and max(before) == 2
+        if not before or max(before) < 2:
+            pytest.skip("this BLAS runs on one thread only: nothing to limit")
         pl.run_stage(object(), "project")
         with pytest.raises(ShellMeshError):
             pl.run_stage(None, "project")
