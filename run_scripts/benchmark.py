@@ -5,6 +5,7 @@
     python run_scripts/benchmark.py --only bwb            # one corpus geometry
     python run_scripts/benchmark.py --no-memory           # skip the 1M-triangle peak-memory run
     python run_scripts/benchmark.py --only bwb --perturb 3   # bwb, then 3 perturbed copies of its input
+    python run_scripts/benchmark.py --only cessna210 --no-memory --perf-pairs 9   # the speed target, 9 pairs
     python run_scripts/benchmark.py --from-json docs/benchmarks.json   # re-render the page only
 
 What it runs, each case in its own fresh child process (``multiprocessing`` "spawn") with a time
