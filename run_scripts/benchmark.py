@@ -436,13 +436,13 @@ def perf_pairs(surface, manifest, name, size, ribs, pairs: int = PERF_PAIRS, spa
     list of every pair's :func:`_pair`, and :func:`pair_medians` of them under ``median``."""
     if int(pairs) < 1:
         raise ValueError(f"perf_pairs needs at least one pair, got {pairs!r}")
-    first = None
-    rows = []
+    cases = []
     for k in range(int(pairs)):
-        case = compare_case(surface, manifest, name, size, ribs, spars, timeout=timeout, gmsh_timeout=gmsh_timeout)
-        rows.append(_pair(case))
-        first = case if first is None else first
-        _log(f"  pair {k + 1}/{int(pairs)}: time ratio {_f(case.get('time_ratio'), '{:.2f}')}")
+        cases.append(compare_case(surface, manifest, name, size, ribs, spars, timeout=timeout,
+                                  gmsh_timeout=gmsh_timeout))
+        _log(f"  pair {k + 1}/{int(pairs)}: time ratio {_f(cases[-1].get('time_ratio'), '{:.2f}')}")
+    rows = [_pair(c) for c in cases]
+    first = cases[0]
     first["pairs"] = rows
     first["median"] = pair_medians(rows)
     return first
