@@ -1416,10 +1416,12 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     cos_new, cos_old, flip = star_moves(rows, tris, T, P, new, nrm)
     ang_new = _min_angle_from_cos(cos_new)
     ang_old = _min_angle_from_cos(cos_old)
+    # each candidate's star is one run of ``rows`` (every candidate has a face)
+    starts = np.concatenate([[0], np.cumsum(np.diff(ptr)[cand])[:-1]])
     worst_new = np.full(n, np.inf)
     worst_old = np.full(n, np.inf)
-    np.minimum.at(worst_new, rows, np.where(flip, -1.0, ang_new))
-    np.minimum.at(worst_old, rows, ang_old)
+    worst_new[cand] = np.minimum.reduceat(np.where(flip, -1.0, ang_new), starts)
+    worst_old[cand] = np.minimum.reduceat(ang_old, starts)
     ok = cand[worst_new[cand] > worst_old[cand] + 1e-9]
     if chain_nb is not None and chain_of is not None and len(ok):
         ok = ok[_in_order_on_arc(ok, new, P, chain_of, chain_nb, arcs)]

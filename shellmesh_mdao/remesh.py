@@ -1613,13 +1613,54 @@ def _finish(W, ctx, rounds, timings, log):
     timings["finish"] = timings.get("finish", 0.0) + time.perf_counter() - t0
 
 
-def _deviation(W, ctx):
+class _MidpointDistances:
+    """Distance of edge midpoints to the input (``loc.closest``), remembered by the midpoint's
+    exact coordinates: the remesh's last steps ask for every edge of a mesh of which only a
+    few edges are new since the last time, and a midpoint's distance depends on its
+    coordinates alone (a hint only shortens the search), so the answers are the same bits
+    as asking for every edge again."""
+
+    def __init__(self, loc):
+        self.loc = loc
+        self.keys = np.zeros(0, np.uint64)
+        self.mid = np.zeros((0, 3))
+        self.dist = np.zeros(0)
+
+    @staticmethod
+    def _keys(X):
+        """One uint64 per row of (k, 3) float64 ``X``, equal for rows of equal bits (rows with
+        equal keys are compared in full before a distance is reused)."""
+        b = np.ascontiguousarray(X).view(np.uint64)
+        return (b[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (b[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) ^ b[:, 2]
+
+    def __call__(self, P, E, vtri):
+        mid = 0.5 * (P[E[:, 0]] + P[E[:, 1]])
+        keys = self._keys(mid)
+        dist = np.empty(len(E))
+        miss = np.ones(len(E), bool)
+        if len(self.keys) and len(E):
+            o = np.argsort(self.keys, kind="stable")
+            pos = np.minimum(np.searchsorted(self.keys[o], keys), len(o) - 1)
+            j = o[pos]
+            hit = (self.keys[j] == keys) & (self.mid[j] == mid).all(1)
+            dist[hit] = self.dist[j[hit]]
+            miss = ~hit
+        if miss.any():
+            _, _, dist[miss] = self.loc.closest(mid[miss], hint=vtri[E[miss, 0]])
+        self.keys, self.mid, self.dist = keys, mid, dist
+        return dist
+
+
+def _deviation(W, ctx, mids=None):
     """Distance from edge midpoints (and face centroids) to the input, with the input
-    triangle each face centroid projects to (patch and normal compatible)."""
+    triangle each face centroid projects to (patch and normal compatible); ``mids``: a
+    :class:`_MidpointDistances` to ask for the midpoints' distances."""
     T = W.topo()
     E = T.E
-    mid = 0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]])
-    _, _, dm = ctx.loc.closest(mid, hint=W.vtri[E[:, 0]])
+    if mids is None:
+        _, _, dm = ctx.loc.closest(0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]]), hint=W.vtri[E[:, 0]])
+    else:
+        dm = mids(W.P, E, W.vtri)
     C = (W.P[W.F[:, 0]] + W.P[W.F[:, 1]] + W.P[W.F[:, 2]]) / 3
     fn = W.face_normals()
     cp, ctri, ok = ctx.project(C, fn, W.fpatch, hint=W.vtri[W.F[:, 0]])
@@ -1766,8 +1807,9 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
     _iterate(W, ctx, iterations, timings, log)
     _finish(W, ctx, finish_rounds, timings, log)
     passes = 0
+    mids = _MidpointDistances(surf.loc)
     for _ in range(deviation_passes):
-        dm, dc, _, _ = _deviation(W, ctx)
+        dm, dc, _, _ = _deviation(W, ctx, mids)
         T = W.topo()
         E = T.E
         L = edge_lengths(W.P, E)
@@ -1797,7 +1839,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         T = W.topo()
         E = T.E
         L = edge_lengths(W.P, E)
-        _, _, dm = surf.loc.closest(0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]]), hint=W.vtri[E[:, 0]])
+        dm = mids(W.P, E, W.vtri)
         over = np.flatnonzero((dm > delta) & (L > 2.0 * h_min))
         if not len(over):
             break
@@ -1819,7 +1861,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         _phase(_cleanup_round, W, ctx, 3, 10.0)
         _phase(_flip_round, W, ctx, 5, "angle")
     # ---------------------------------------------------------------- output
-    dm, dc, ctri, ok = _deviation(W, ctx)
+    dm, dc, ctri, ok = _deviation(W, ctx, mids)
     comp = surf.tri_comp[ctri]
     fdeg = np.bincount(W.fe.reshape(-1), minlength=W.n) if len(W.fe) else np.zeros(W.n, np.int64)
     corners = np.flatnonzero((W.kind == _CORNER) | ((fdeg > 0) & (fdeg != 2)))

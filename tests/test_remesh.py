@@ -445,3 +445,46 @@ def test_collapse_apply_gives_the_numpy_update(seed):
     for aa, bb in (([a[0], a[0]], [b[0], b[0]]), ([a[0], a[1]], [a[1], b[1]])):
         with pytest.raises(ValueError, match="at most once and none into a removed one"):
             collapse_apply(W0.F, patch, fe, ch, aa, bb, n)
+
+
+def test_midpoint_distances_reuse_only_unchanged_midpoints():
+    """The remesh's last steps remember edge-midpoint distances by the midpoint's coordinates:
+    after some vertices move and edges change, the answers are the same bits as asking the
+    locator for every edge, and only the new midpoints are asked for."""
+    from shellmesh_mdao.remesh import _MidpointDistances
+
+    rng = np.random.default_rng(3)
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 40, endpoint=False), np.linspace(0.2, np.pi - 0.2, 20))
+    S = np.stack([np.sin(v) * np.cos(u), np.sin(v) * np.sin(u), np.cos(v)], -1).reshape(-1, 3)
+    idx = np.arange(800).reshape(20, 40)
+    a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]
+    T = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    loc = SurfaceLocator(S, T)
+    asked = []
+    real = loc.closest
+
+    def counting(q, hint=None):
+        asked.append(len(q))
+        return real(q, hint=hint)
+    loc.closest = counting
+    P = S * 1.01 + 0.003 * rng.standard_normal(S.shape)
+    E = np.unique(np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1), axis=0)
+    vtri = np.full(len(P), -1, np.int64)
+    mids = _MidpointDistances(loc)
+    d0 = mids(P, E, vtri)
+    assert asked == [len(E)]
+    assert np.array_equal(d0, real(0.5 * (P[E[:, 0]] + P[E[:, 1]]))[2])
+    # move five vertices, drop some edges and add others
+    P2 = P.copy()
+    moved = np.array([5, 77, 300, 512, 799])
+    P2[moved] += 0.01
+    E2 = np.concatenate([E[7:], [[0, 400], [10, 700]]])
+    d2 = mids(P2, E2, vtri)
+    assert np.array_equal(d2, real(0.5 * (P2[E2[:, 0]] + P2[E2[:, 1]]))[2])
+    new = int(np.isin(E2, moved).any(1).sum()) + 2
+    assert asked == [len(E), new]
+    # keys that collide everywhere: rows are compared in full, so nothing wrong is reused
+    mids_c = _MidpointDistances(loc)
+    mids_c._keys = lambda X: np.zeros(len(X), np.uint64)
+    mids_c(P, E, vtri)
+    assert np.array_equal(mids_c(P2, E2, vtri), d2)
