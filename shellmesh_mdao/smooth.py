@@ -894,11 +894,13 @@ def _face_rings(faces, ptr, vf, verts, rings: int = 2):
     return region
 
 
-def _nearest_other(P, verts):
+def _nearest_other(P, verts, cell=None):
     """Distance from each of ``verts`` to the nearest other vertex of ``P`` (one thread: it runs
-    beside the smoothing's own work, see :class:`~shellmesh_mdao.kernels._Background`)."""
-    dn, _ = cKDTree(P, balanced_tree=False, compact_nodes=False).query(P[verts], k=2, workers=1)
-    return dn[:, 1]
+    beside the smoothing's own work, see :class:`~shellmesh_mdao.kernels._Background`): a KD-tree
+    query's values, from a grid of cubes of edge ``cell``
+    (:func:`~shellmesh_mdao.kernels.nearest_other_distance`)."""
+    from .kernels import nearest_other_distance
+    return nearest_other_distance(P, verts, cell)
 
 
 class _LDL:
@@ -1239,10 +1241,10 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         if not len(movable):
             it = 0
             break
-        # trust region: distance to the nearest other vertex, asked of a KD-tree in a second
-        # thread while this one refreshes and solves (it depends on P alone; a distance does
-        # not depend on the tree's layout nor on the threads answering: the cheapest build)
-        near = _Background(_nearest_other, P, movable)
+        # trust region: distance to the nearest other vertex, from a grid of cubes of 1.5 median
+        # edges in a second thread while this one refreshes and solves (it depends on P alone;
+        # the grid's cell sets the speed only: a KD-tree query's values)
+        near = _Background(_nearest_other, P, movable, 1.5 * scale)
         if (it - 1) % refresh == 0:
             vn, kap = _vertex_normals_and_curvature(P, faces, is_tri, n)
             T, owner, nrm, tv = _frames(mesh, P, supports, vn)

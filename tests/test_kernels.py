@@ -1419,3 +1419,32 @@ def test_element_normals_and_faces_at_match_numpy(seed):
         faces_at(ptr, vf, [n], m)
     with pytest.raises(ValueError, match="faces holds indices outside"):
         element_normals(P, np.where(is_tri[:, None], faces, n), is_tri)
+
+
+@pytest.mark.parametrize("case", ["mesh", "flat", "spread", "duplicates", "one", "subset"])
+def test_nearest_other_distance_gives_the_kd_trees_bits(case):
+    """The smoothing's trust radius: the grid gives scipy's KD-tree values bit for bit on a
+    surface-like point set, a flat one, a wildly uneven one, coincident points (0), a single
+    point (inf) and a subset of query vertices, whatever the cell."""
+    from scipy.spatial import cKDTree
+
+    from shellmesh_mdao.kernels import nearest_other_distance
+
+    rng = np.random.default_rng(11)
+    u = rng.random((3000, 2)) * [2 * np.pi, np.pi]
+    P = np.stack([np.cos(u[:, 0]) * np.sin(u[:, 1]), np.sin(u[:, 0]) * np.sin(u[:, 1]), 0.2 * np.cos(u[:, 1])], 1)
+    if case == "flat":
+        P[:, 2] = 0.0
+    elif case == "spread":
+        P = P * [1e4, 1.0, 1e-4] + np.where(rng.random((len(P), 1)) < 0.01, 1e3, 0.0)
+    elif case == "duplicates":
+        P = np.vstack([P, P[::97]])
+    elif case == "one":
+        P = P[:1]
+    verts = np.arange(len(P)) if case != "subset" else np.sort(rng.choice(len(P), 700, replace=False))
+    want = cKDTree(P).query(P[verts], k=2)[0][:, 1]
+    for cell in (None, 0.01, 0.05, 0.3, 5.0):
+        got = nearest_other_distance(P, verts, cell)
+        assert np.array_equal(got, want), (case, cell)
+    if case == "duplicates":
+        assert len(P) == 3031 and (got[-31:] == 0).all()          # each copy's nearest is its original

@@ -697,7 +697,7 @@ def test_smooth_fills_the_figures_asked_for():
 
 
 def test_trust_radius_query_in_its_own_thread():
-    """The smoothing asks its trust radius (distance to the nearest other vertex) of a KD-tree in a
+    """The smoothing asks its trust radius (distance to the nearest other vertex) of a grid in a
     second thread: the distances are a brute-force scan's, coincident points give 0, and an
     exception in the thread reaches the caller."""
     from shellmesh_mdao.smooth import _Background, _nearest_other
@@ -712,7 +712,7 @@ def test_trust_radius_query_in_its_own_thread():
     got = job.result()
     assert np.allclose(got, d.min(1), rtol=0, atol=1e-12) and got[1] == 0.0
     assert job.result() is got                             # asked twice, one value
-    with pytest.raises(IndexError):
+    with pytest.raises(ValueError, match="verts holds indices outside"):
         _Background(_nearest_other, P, np.array([400])).result()
 
 
