@@ -232,6 +232,10 @@ class PipelineResult:
     state: PipelineState | None = None
 
 
+#: the libraries one_blas_thread last listed, and how many modules were imported then
+_BLAS_LIBS: dict = {"controller": None, "modules": -1}
+
+
 @contextmanager
 def one_blas_thread():
     """BLAS (numpy's and scipy's OpenBLAS, any other threadpoolctl finds) on one thread inside
@@ -240,10 +244,17 @@ def one_blas_thread():
     the target case they took 0.6-0.8 s of CPU a run (system time) and the second core from the
     closest-point queries and the trust-radius tree, and from a second pipeline process beside it
     (docs/benchmarks.md, thirteenth pass). The results do not depend on it: the determinism test
-    runs one process with one BLAS thread and another with the default."""
-    from threadpoolctl import threadpool_limits
+    runs one process with one BLAS thread and another with the default.
 
-    with threadpool_limits(limits=1, user_api="blas"):
+    The libraries are listed once (about 2.5 ms in a pipeline process, for each of a run's ten
+    stages) and listed again only when modules were imported since: a native library, BLAS
+    among them, comes with an extension module's import."""
+    from threadpoolctl import ThreadpoolController
+
+    if _BLAS_LIBS["modules"] != len(sys.modules):
+        _BLAS_LIBS["controller"] = ThreadpoolController()
+        _BLAS_LIBS["modules"] = len(sys.modules)
+    with _BLAS_LIBS["controller"].limit(limits=1, user_api="blas"):
         yield
 
 
