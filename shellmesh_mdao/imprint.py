@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from .errors import ImprintError
 from .kernels import (centroid_d2, chain_walk, corner_cosines, edge_lookup, edge_rows, edge_table, greedy_independent,
-                      segments_scan, segments_within, skin_flips, star_moves)
+                      segments_scan, segments_within, skin_flips, star_independent, star_moves)
 from .mesh import ShellMesh, bbox_diagonal, cross_rows, norm_rows, reduce_short, unique_edges, vertex_faces
 from .section import Plane, SectionArc, plane_section, section_arc
 
@@ -309,8 +309,8 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     rv = np.unique(rt)
     h = vmin[rv]
     # signs: zero only for vertices inside the bounds (exactly on the plane, snapped, or
-    # crossing vertices given); outside the bounds a vertex on the plane counts as +
-    diag = bbox_diagonal(P)
+    # crossing vertices given); outside the bounds a vertex on the plane counts as + (diag:
+    # of the same points, measured above)
     inside = np.ones(len(P), bool)
     for bnd in spec.bounds:
         inside &= bnd.side(P) >= -1e-9 * diag
@@ -1427,26 +1427,12 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
         ok = ok[_in_order_on_arc(ok, new, P, chain_of, chain_nb, arcs)]
     if not len(ok):
         return P, 0
-    # independent set: vertices sharing a triangle cannot both move (lowest-index wins)
+    # independent set: vertices sharing a triangle cannot both move (the larger gain wins, the
+    # lower index on a tie)
     gain = worst_new - worst_old
+    # (best gain first, in 8 rounds: kernels.star_independent)
     order = ok[np.argsort(-gain[ok], kind="stable")]
-    take = []
-    tri_taken = np.zeros(len(T), bool)
-    for _ in range(8):
-        if not len(order):
-            break
-        trs = star[_ranges(ptr[order], ptr[order + 1])]
-        pos = np.repeat(np.arange(len(order)), np.diff(ptr)[order])
-        firstpos = np.full(len(T), len(order))
-        np.minimum.at(firstpos, trs, pos)
-        mine = firstpos[trs] == pos
-        allmine = np.bincount(pos, weights=(~mine).astype(float), minlength=len(order)) == 0
-        free = np.bincount(pos, weights=tri_taken[trs].astype(float), minlength=len(order)) == 0
-        win = order[allmine & free]
-        take.append(win)
-        tri_taken[star[_ranges(ptr[win], ptr[win + 1])]] = True
-        order = order[~(allmine & free)]
-    take = np.concatenate(take) if take else np.zeros(0, np.int64)
+    take = star_independent(order, ptr, star, len(T), 8)
     P = P.copy()
     P[take] = new[take]
     return P, len(take)

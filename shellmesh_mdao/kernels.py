@@ -3116,6 +3116,66 @@ def _star_moves(rows, tris, T, P, new, nrm):
     return cos_new, cos_old, flip
 
 
+@njit(cache=True, nogil=True)
+def _star_independent(order, ptr, star, ntri, rounds):
+    cur = order.copy()
+    ncur = cur.shape[0]
+    nxt = np.empty(ncur, np.int64)
+    taken = np.zeros(ntri, np.bool_)
+    firstpos = np.empty(ntri, np.int64)
+    out = np.empty(ncur, np.int64)
+    nout = 0
+    for _ in range(rounds):
+        if ncur == 0:
+            break
+        for i in range(ncur):
+            for k in range(ptr[cur[i]], ptr[cur[i] + 1]):
+                firstpos[star[k]] = ncur
+        for i in range(ncur):
+            for k in range(ptr[cur[i]], ptr[cur[i] + 1]):
+                if i < firstpos[star[k]]:
+                    firstpos[star[k]] = i
+        first = nout
+        nn = 0
+        for i in range(ncur):
+            v = cur[i]
+            win = True
+            for k in range(ptr[v], ptr[v + 1]):
+                if firstpos[star[k]] != i or taken[star[k]]:
+                    win = False
+                    break
+            if win:
+                out[nout] = v
+                nout += 1
+            else:
+                nxt[nn] = v
+                nn += 1
+        for j in range(first, nout):            # this round's winners take their triangles
+            for k in range(ptr[out[j]], ptr[out[j] + 1]):
+                taken[star[k]] = True
+        cur[:nn] = nxt[:nn]
+        ncur = nn
+    return out[:nout]
+
+
+def star_independent(order, ptr, star, ntri: int, rounds: int = 8):
+    """The imprint smoothing's independent set of moving vertices: in each of ``rounds``
+    rounds, a vertex of ``order`` (best first) is taken when it comes first in ``order``
+    among the remaining vertices on every triangle of its star (``star[ptr[v]:ptr[v + 1]]``,
+    triangle ids below ``ntri``) and none of those triangles was taken in an earlier round;
+    the vertices taken take their triangles, the others go on to the next round in their
+    order. Returns the vertices taken, round by round, each round in ``order``'s order (the
+    numpy rounds of ``imprint._smooth_round``, the same list)."""
+    order = np.ascontiguousarray(order, dtype=np.int64).reshape(-1)
+    ptr = np.ascontiguousarray(ptr, dtype=np.int64).reshape(-1)
+    star = np.ascontiguousarray(star, dtype=np.int64).reshape(-1)
+    if not len(ptr) or ptr[0] != 0 or ptr[-1] != len(star) or (np.diff(ptr) < 0).any():
+        raise ValueError("star_independent: ptr must be CSR row pointers into star")
+    _check_index("order", order, len(ptr) - 1)
+    _check_index("star", star, int(ntri))
+    return _star_independent(order, ptr, star, int(ntri), int(rounds))
+
+
 def star_moves(rows, tris, T, P, new, nrm):
     """The imprint smoothing's test of moving vertex ``rows[i]`` from ``P`` to ``new`` alone, for
     each of its triangles ``tris[i]`` (of ``T`` (m, 3)): the :func:`corner_cosines` of the
@@ -3393,6 +3453,7 @@ def warm_up() -> float:
     closest_on_triangles(np.ones((1, 3)), np.zeros((1, 3)), np.eye(3)[:1], np.eye(3)[1:2])
     TriangleBVH(np.eye(3), np.array([[0, 1, 2]])).closest(np.ones((1, 3)))
     nearest_other_distance(np.eye(3), np.array([0, 2]), 0.5)
+    star_independent(np.array([0, 1]), np.array([0, 1, 2]), np.array([0, 0]), 1)
     _in_range(np.zeros(1, np.int64), 1)
     safe_matching_rounds([0], [1], [-1.0], 2)
     closest_on_curves(np.zeros((1, 3)), [0], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [np.sqrt(3.0)])

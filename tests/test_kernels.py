@@ -1448,3 +1448,49 @@ def test_nearest_other_distance_gives_the_kd_trees_bits(case):
         assert np.array_equal(got, want), (case, cell)
     if case == "duplicates":
         assert len(P) == 3031 and (got[-31:] == 0).all()          # each copy's nearest is its original
+
+
+def _star_rounds_reference(order, ptr, star, ntri, rounds):
+    """The numpy rounds the imprint smoothing used before kernels.star_independent."""
+    def ranges(a, b):
+        return np.concatenate([np.arange(x, y) for x, y in zip(a, b)]) if len(a) else np.zeros(0, np.int64)
+    take = []
+    tri_taken = np.zeros(ntri, bool)
+    for _ in range(rounds):
+        if not len(order):
+            break
+        trs = star[ranges(ptr[order], ptr[order + 1])]
+        pos = np.repeat(np.arange(len(order)), np.diff(ptr)[order])
+        firstpos = np.full(ntri, len(order))
+        np.minimum.at(firstpos, trs, pos)
+        mine = firstpos[trs] == pos
+        allmine = np.bincount(pos, weights=(~mine).astype(float), minlength=len(order)) == 0
+        free = np.bincount(pos, weights=tri_taken[trs].astype(float), minlength=len(order)) == 0
+        win = order[allmine & free]
+        take.append(win)
+        tri_taken[star[ranges(ptr[win], ptr[win + 1])]] = True
+        order = order[~(allmine & free)]
+    return np.concatenate(take) if take else np.zeros(0, np.int64)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_star_independent_matches_the_numpy_rounds(seed):
+    """The imprint smoothing's independent set of moving vertices: the same vertices in the
+    same order as the numpy rounds, no two taken vertices sharing a triangle."""
+    from shellmesh_mdao.kernels import star_independent
+    from shellmesh_mdao.mesh import vertex_faces
+
+    rng = np.random.default_rng(seed)
+    n = 300
+    T = rng.integers(0, n, size=(700, 3))
+    ptr, star = vertex_faces(T, n)
+    has = np.flatnonzero(np.diff(ptr) > 0)
+    order = rng.permutation(has)[: int(rng.integers(1, len(has)))]
+    for rounds in (1, 3, 8):
+        got = star_independent(order, ptr, star, len(T), rounds)
+        want = _star_rounds_reference(order, ptr, star, len(T), rounds)
+        assert np.array_equal(got, want)
+        tris = np.concatenate([star[ptr[v]:ptr[v + 1]] for v in got]) if len(got) else np.zeros(0, np.int64)
+        _, per_vertex_unique = np.unique(np.concatenate([np.unique(star[ptr[v]:ptr[v + 1]]) for v in got]),
+                                         return_counts=True) if len(got) else (None, np.ones(1))
+        assert len(tris) and (per_vertex_unique == 1).all()
