@@ -458,7 +458,10 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     bound = np.minimum(max_offset, local_fraction * h)
     col = np.full(n, -1, np.int64)
     col[cand] = np.arange(len(cand))
-    nu = mesh.vertex_normals()[cand]
+    # the vertex normals from the faces at the nodes only: each node's sum runs over the same
+    # faces in the same order as over the whole mesh (the same bits)
+    faces_at = _face_rings(F, vptr, vface, cand, 1)
+    nu = ShellMesh(P, F[faces_at]).vertex_normals()[cand]
     D = 0.5 * (norm_rows(P[Q[:, 2]] - P[Q[:, 0]], axis=1) + norm_rows(P[Q[:, 3]] - P[Q[:, 1]], axis=1))
     t = np.zeros(len(cand))
     start = None
@@ -483,17 +486,22 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
         start = (t, lam)             # the next round's problem is this one re-linearised
     t[np.abs(t) <= 1e-9 * bound] = 0.0            # round-off of the solve: those nodes stay on the input
     # guard: no element at or below guard_jacobian worse, none above falls to it, none turns over
-    faces_at = _face_rings(F, vptr, vface, cand, 1)
+    # (after a halving only the faces at the nodes it moved are measured again: a face's figures
+    # depend on its own corners alone)
     Fa = F[faces_at]
     sj0 = q0["scaled_jacobian"][faces_at]
     n0 = _face_normals(P, Fa, Fa[:, 3] < 0)
     floor = np.minimum(sj0, guard_jacobian) - 1e-12
     halvings = 0
+    redo = np.arange(len(Fa))
+    sj = np.empty(len(Fa))
+    flip = np.empty(len(Fa), bool)
     for k in range(40):
         X = P.copy()
         X[cand] += t[:, None] * nu
-        sj = element_quality(X, Fa, ("scaled_jacobian",))["scaled_jacobian"]
-        flip = np.einsum("ij,ij->i", _face_normals(X, Fa, Fa[:, 3] < 0), n0) <= 0
+        Fr = Fa[redo]
+        sj[redo] = element_quality(X, Fr, ("scaled_jacobian",))["scaled_jacobian"]
+        flip[redo] = np.einsum("ij,ij->i", _face_normals(X, Fr, Fr[:, 3] < 0), n0[redo]) <= 0
         bad = (sj < floor) | flip
         if not bad.any():
             break
@@ -502,6 +510,9 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
         v = v[v >= 0]
         t[v] = 0.0 if k >= 10 else 0.5 * t[v]
         halvings += 1
+        moved = np.zeros(n + 1, bool)                 # slot n: the -1 corner of a triangle
+        moved[cand[v]] = True
+        redo = np.flatnonzero(moved[np.where(Fa >= 0, Fa, n)].any(1))
     else:
         return mesh, info
     w = w0.copy()
