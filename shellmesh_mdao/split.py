@@ -161,11 +161,17 @@ def polygon_energy(corners, is_tri, c1: float = 1.0, c2: float = 1.0, form: str 
     k = len(P)
     if k == 0:
         return np.zeros(0)
-    nxt = np.where(tri[:, None], np.array([1, 2, 0, 0]), np.array([1, 2, 3, 0]))
-    prv = np.where(tri[:, None], np.array([2, 0, 1, 1]), np.array([3, 0, 1, 2]))
     valid = np.ones((k, 4), bool)
     valid[tri, 3] = False
-    rows = np.arange(k)[:, None]
+    if tri.all() or not tri.any():
+        # one kind (split_energy's batches): the same corners by plain column indices
+        nxt = np.array([1, 2, 0, 0] if tri[0] else [1, 2, 3, 0])
+        prv = np.array([2, 0, 1, 1] if tri[0] else [3, 0, 1, 2])
+        rows = slice(None)
+    else:
+        nxt = np.where(tri[:, None], np.array([1, 2, 0, 0]), np.array([1, 2, 3, 0]))
+        prv = np.where(tri[:, None], np.array([2, 0, 1, 1]), np.array([3, 0, 1, 2]))
+        rows = np.arange(k)[:, None]
     d = P[rows, nxt] - P                             # side i: corner i -> next corner
     L = norm_rows(d, axis=2)
     n = np.where(tri, 3.0, 4.0)

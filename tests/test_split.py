@@ -473,3 +473,16 @@ def test_time_limited_lp_vertex_worse_than_keeping_is_not_used(monkeypatch):
     out, res = split_polygons(mesh)
     assert "Time limit" in res.status and "kept all polygons" in res.status
     assert np.array_equal(out.faces, mesh.faces) and res.n_split_edges == 0
+
+
+def test_polygon_energy_one_kind_batches_match_mixed_ones():
+    """A batch of one kind (split_energy's) gathers its corners by plain column indices: the
+    same energies, bit for bit, as the same polygons in a batch mixing triangles and quads."""
+    rng = np.random.default_rng(4)
+    P = rng.normal(size=(500, 4, 3))
+    P[7, 1] = P[7, 0]                                   # a zero-length side: the large energy
+    for t in (True, False):
+        tri = np.full(len(P), t)
+        mixed = polygon_energy(np.concatenate([P, P[:1]]), np.concatenate([tri, [not t]]))[:len(P)]
+        got = polygon_energy(P, tri)
+        assert np.array_equal(got, mixed) and got[7] == 1e3
