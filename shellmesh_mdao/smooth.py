@@ -1241,7 +1241,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         if not len(movable):
             it = 0
             break
-        # trust region: distance to the nearest other vertex, from a grid of cubes of 1.5 median
+        # trust region: distance to the nearest other vertex, from a grid of cubes of >= 1.5 median
         # edges in a second thread while this one refreshes and solves (it depends on P alone;
         # the grid's cell sets the speed only: a KD-tree query's values)
         near = _Background(_nearest_other, P, movable, 1.5 * scale)
