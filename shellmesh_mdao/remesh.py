@@ -1651,16 +1651,13 @@ class _MidpointDistances:
         return dist
 
 
-def _deviation(W, ctx, mids=None):
+def _deviation(W, ctx, mids):
     """Distance from edge midpoints (and face centroids) to the input, with the input
-    triangle each face centroid projects to (patch and normal compatible); ``mids``: a
-    :class:`_MidpointDistances` to ask for the midpoints' distances."""
+    triangle each face centroid projects to (patch and normal compatible); the midpoints'
+    distances from ``mids`` (a :class:`_MidpointDistances`)."""
     T = W.topo()
     E = T.E
-    if mids is None:
-        _, _, dm = ctx.loc.closest(0.5 * (W.P[E[:, 0]] + W.P[E[:, 1]]), hint=W.vtri[E[:, 0]])
-    else:
-        dm = mids(W.P, E, W.vtri)
+    dm = mids(W.P, E, W.vtri)
     C = (W.P[W.F[:, 0]] + W.P[W.F[:, 1]] + W.P[W.F[:, 2]]) / 3
     fn = W.face_normals()
     cp, ctri, ok = ctx.project(C, fn, W.fpatch, hint=W.vtri[W.F[:, 0]])

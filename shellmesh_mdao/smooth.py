@@ -65,8 +65,8 @@ from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
 from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
-                      element_normals, face_quality, faces_at, min_corner_sj, ortho_gradient, ortho_jacobian,
-                      pair_difference)
+                      element_normals, face_quality, faces_at, min_corner_sj, nearest_other_distance,
+                      ortho_gradient, ortho_jacobian, pair_difference)
 from .mesh import (ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows,
                    unique_edges, vertex_faces)
 from .project import SurfaceLocator, closest_point_on_triangles
@@ -894,15 +894,6 @@ def _face_rings(faces, ptr, vf, verts, rings: int = 2):
     return region
 
 
-def _nearest_other(P, verts, cell=None):
-    """Distance from each of ``verts`` to the nearest other vertex of ``P`` (one thread: it runs
-    beside the smoothing's own work, see :class:`~shellmesh_mdao.kernels._Background`): a KD-tree
-    query's values, from a grid of cubes of edge ``cell``
-    (:func:`~shellmesh_mdao.kernels.nearest_other_distance`)."""
-    from .kernels import nearest_other_distance
-    return nearest_other_distance(P, verts, cell)
-
-
 class _LDL:
     """Sparse LDL^T factorisations (qdldl: AMD ordering, no pivoting) of symmetric positive
     definite matrices that share one sparsity pattern: the ordering and the symbolic
@@ -1244,7 +1235,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         # trust region: distance to the nearest other vertex, from a grid of cubes of >= 1.5 median
         # edges in a second thread while this one refreshes and solves (it depends on P alone;
         # the grid's cell sets the speed only: a KD-tree query's values)
-        near = _Background(_nearest_other, P, movable, 1.5 * scale)
+        near = _Background(nearest_other_distance, P, movable, 1.5 * scale)
         if (it - 1) % refresh == 0:
             vn, kap = _vertex_normals_and_curvature(P, faces, is_tri, n)
             T, owner, nrm, tv = _frames(mesh, P, supports, vn)

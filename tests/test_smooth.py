@@ -700,7 +700,8 @@ def test_trust_radius_query_in_its_own_thread():
     """The smoothing asks its trust radius (distance to the nearest other vertex) of a grid in a
     second thread: the distances are a brute-force scan's, coincident points give 0, and an
     exception in the thread reaches the caller."""
-    from shellmesh_mdao.smooth import _Background, _nearest_other
+    from shellmesh_mdao.kernels import nearest_other_distance
+    from shellmesh_mdao.smooth import _Background
 
     rng = np.random.default_rng(5)
     P = rng.normal(size=(400, 3))
@@ -708,12 +709,12 @@ def test_trust_radius_query_in_its_own_thread():
     verts = np.arange(0, 400, 3)
     d = np.linalg.norm(P[verts, None, :] - P[None, :, :], axis=2)
     d[np.arange(len(verts)), verts] = np.inf
-    job = _Background(_nearest_other, P, verts)
+    job = _Background(nearest_other_distance, P, verts)
     got = job.result()
     assert np.allclose(got, d.min(1), rtol=0, atol=1e-12) and got[1] == 0.0
     assert job.result() is got                             # asked twice, one value
     with pytest.raises(ValueError, match="verts holds indices outside"):
-        _Background(_nearest_other, P, np.array([400])).result()
+        _Background(nearest_other_distance, P, np.array([400])).result()
 
 
 def test_ldl_reuses_the_ordering_with_the_same_bits():
