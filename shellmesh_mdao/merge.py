@@ -39,7 +39,7 @@ from scipy import sparse
 from .errors import MeshValidationError
 from .kernels import safe_matching_rounds
 from .mesh import ShellMesh, norm_rows
-from .split import _fixed_edge_mask, _highs_solve, polygon_energy
+from .split import _fixed_edge_mask, _highs_solve, _highs_solve_halves, polygon_energy
 
 __all__ = ["MergeResult", "interior_vertices", "merge_candidates", "merge_triangles", "quad_energy"]
 
@@ -267,7 +267,7 @@ def _valence_block(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_li
     k = len(w)
     V, vid = _counted(E.reshape(-1), vmask, n_points)
     A, c, lo, hi, ub = _valence_model(E, f0, f1, w, vid, valence[V] - 4.0 - done[V], lam)
-    sol = _highs_solve(c, A, lo, hi, ub, integer=False, time_limit=time_limit)
+    sol = _highs_solve_halves(c, A, lo, hi, ub, time_limit=time_limit)
     seconds = sol.seconds
     if sol.x is None:
         return None, float("nan"), sol.status, sol.status, seconds

@@ -337,6 +337,66 @@ def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, 
     return _Solve(x, status, obj, gap, time.perf_counter() - t0, bound)
 
 
+#: fewest columns the smaller half of an LP needs before :func:`_highs_solve_halves` solves it in
+#: a thread of its own (a thread and a second HiGHS set-up cost about a millisecond)
+LP_HALF_MIN = 2000
+
+
+def _independent_halves(A: sparse.csr_matrix):
+    """Two groups of the columns and rows of ``A`` that share no row: the connected components of
+    its row-column graph, the largest first (ties: the lowest column), a component to the second
+    group when more than half of all the columns come before its middle. Returns
+    ``((cols0, rows0), (cols1, rows1))``, each sorted; rows without columns go to the first."""
+    from scipy.sparse.csgraph import connected_components
+
+    m, n = A.shape
+    G = sparse.bmat([[None, A], [A.T, None]], format="csr")
+    ncomp, lab = connected_components(G, directed=False)
+    clab, rlab = lab[m:], lab[:m]
+    size = np.bincount(clab, minlength=ncomp)
+    first = np.full(ncomp, n, np.int64)
+    u, at = np.unique(clab, return_index=True)
+    first[u] = at
+    order = np.lexsort((first, -size))
+    mid = np.cumsum(size[order]) - 0.5 * size[order]
+    second = np.zeros(ncomp, bool)
+    second[order] = mid > 0.5 * n
+    second[size == 0] = False
+    return ((np.flatnonzero(~second[clab]), np.flatnonzero(~second[rlab])),
+            (np.flatnonzero(second[clab]), np.flatnonzero(second[rlab])))
+
+
+def _highs_solve_halves(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, time_limit: float) -> _Solve:
+    """The LP of :func:`_highs_solve` (``integer=False``), solved as two independent halves
+    (:func:`_independent_halves`) side by side, one in a second thread (HiGHS releases the GIL),
+    when the smaller half has at least :data:`LP_HALF_MIN` columns; else in one piece. An LP
+    whose rows fall apart into blocks is its blocks' LPs side by side: the same optimal
+    objective, though where the optimum is not unique another optimal vertex may come out.
+    Status "Optimal" when both halves are optimal, else the first other status; the objective
+    the sum; ``seconds`` the wall time of the whole."""
+    from .kernels import _Background
+
+    A = sparse.csr_matrix(A)
+    halves = _independent_halves(A) if A.shape[1] >= 2 * LP_HALF_MIN else None
+    if halves is None or min(len(h[0]) for h in halves) < LP_HALF_MIN:
+        return _highs_solve(c, A, row_lo, row_hi, ub, integer=False, time_limit=time_limit)
+    t0 = time.perf_counter()
+    c, row_lo, row_hi, ub = (np.asarray(a, dtype=np.float64) for a in (c, row_lo, row_hi, ub))
+    (c0, r0), (c1, r1) = halves
+    other = _Background(lambda: _highs_solve(c[c1], A[r1][:, c1], row_lo[r1], row_hi[r1], ub[c1], integer=False,
+                                             time_limit=time_limit))
+    s0 = _highs_solve(c[c0], A[r0][:, c0], row_lo[r0], row_hi[r0], ub[c0], integer=False, time_limit=time_limit)
+    s1 = other.result()
+    status = next((s.status for s in (s0, s1) if s.status != "Optimal"), "Optimal")
+    if s0.x is None or s1.x is None:
+        return _Solve(None, status, float("nan"), 0.0, time.perf_counter() - t0)
+    x = np.empty(len(c))
+    x[c0] = s0.x
+    x[c1] = s1.x
+    obj = s0.objective + s1.objective
+    return _Solve(x, status, obj, 0.0, time.perf_counter() - t0, obj)
+
+
 # --------------------------------------------------------------------------- split
 @dataclass
 class SplitResult:

@@ -486,3 +486,81 @@ def test_polygon_energy_one_kind_batches_match_mixed_ones():
         mixed = polygon_energy(np.concatenate([P, P[:1]]), np.concatenate([tri, [not t]]))[:len(P)]
         got = polygon_energy(P, tri)
         assert np.array_equal(got, mixed) and got[7] == 1e3
+
+
+def _block_lp(sizes, seed):
+    """A packing LP ``min c x, A x <= 1, 0 <= x <= 1`` whose rows fall apart into blocks of the
+    given column counts (each block a random sparse pattern with every column in a row), the
+    blocks' columns interleaved so that no block is a contiguous range, plus one empty row."""
+    from scipy import sparse
+
+    rng = np.random.default_rng(seed)
+    n = sum(sizes)
+    perm = rng.permutation(n)
+    rows, cols, r0 = [], [], 0
+    start = 0
+    for k in sizes:
+        cb = perm[start:start + k]
+        start += k
+        nr = max(1, k // 2)
+        for j, col in enumerate(cb):           # every column in two rows of its block
+            for r in {j % nr, int(rng.integers(nr))}:
+                rows.append(r0 + r)
+                cols.append(col)
+        r0 += nr
+    A = sparse.csr_matrix((rng.uniform(0.5, 2.0, len(rows)), (rows, cols)), shape=(r0 + 1, n))
+    c = -rng.uniform(1.0, 2.0, n)              # distinct costs: a unique optimum
+    return c, A, np.full(r0 + 1, -np.inf), np.ones(r0 + 1), np.ones(n)
+
+
+def test_independent_halves_share_no_row_and_keep_blocks_whole():
+    from shellmesh_mdao.split import _independent_halves
+
+    sizes = [40, 30, 12, 9, 5, 3, 1]
+    c, A, lo, hi, ub = _block_lp(sizes, 0)
+    (c0, r0), (c1, r1) = _independent_halves(A)
+    n, m = A.shape[1], A.shape[0]
+    assert np.array_equal(np.sort(np.concatenate([c0, c1])), np.arange(n))
+    assert np.array_equal(np.sort(np.concatenate([r0, r1])), np.arange(m))
+    # no row of one half touches a column of the other
+    assert A[r0][:, c1].nnz == 0 and A[r1][:, c0].nnz == 0
+    # the largest block alone in the first half (its middle, 20, is below half of 100); every
+    # block after it in the second; the empty row in the first
+    assert len(c0) == 40 and len(c1) == 60 and (m - 1) in r0
+    # the same halves every time
+    again = _independent_halves(A)
+    assert all(np.array_equal(a, b) for h, g in zip(again, ((c0, r0), (c1, r1))) for a, b in zip(h, g))
+
+
+def test_lp_in_halves_gives_the_one_piece_optimum_from_two_threads(monkeypatch):
+    import threading
+
+    from shellmesh_mdao import split as sp
+
+    c, A, lo, hi, ub = _block_lp([60, 50, 20, 15], 1)
+    one = sp._highs_solve(c, A, lo, hi, ub, integer=False, time_limit=10.0)
+    threads = []
+    real = sp._highs_solve
+
+    def recording(*a, **k):
+        threads.append((threading.get_ident(), a[1].shape[1]))
+        return real(*a, **k)
+
+    monkeypatch.setattr(sp, "_highs_solve", recording)
+    # below LP_HALF_MIN columns in the smaller half: one piece, in the caller's thread
+    res = sp._highs_solve_halves(c, A, lo, hi, ub, time_limit=10.0)
+    assert threads == [(threading.get_ident(), 145)]
+    assert np.array_equal(res.x, one.x)
+    threads.clear()
+    monkeypatch.setattr(sp, "LP_HALF_MIN", 20)
+    res = sp._highs_solve_halves(c, A, lo, hi, ub, time_limit=10.0)
+    assert sorted(k for _, k in threads) == [60, 85] and len({t for t, _ in threads}) == 2
+    assert res.status == "Optimal" and res.mip_gap == 0.0
+    assert np.allclose(res.x, one.x, atol=1e-9, rtol=0)
+    assert res.objective == pytest.approx(one.objective, rel=1e-12) and res.dual_bound == res.objective
+    # an infeasible half: no solution, HiGHS's status of that half
+    lo2 = lo.copy()
+    (c0, r0), (c1, r1) = sp._independent_halves(A)
+    lo2[r1[0]] = 1e6                         # a row of the second half that no x in [0, 1] meets
+    bad = sp._highs_solve_halves(c, A, lo2, np.maximum(hi, lo2), ub, time_limit=10.0)
+    assert bad.x is None and bad.status == "Infeasible"
