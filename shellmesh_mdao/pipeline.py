@@ -426,14 +426,23 @@ def _supports_hold(before: ShellMesh, after: ShellMesh) -> bool:
 def stage_split(state: PipelineState) -> PipelineState:
     """Splitting LP (paper eq. 1-3) on the whole mesh; chains, junctions and feature lines are
     never split. Derives the node supports (input skin, member planes, feature curves)."""
+    from .kernels import _Background
     from .smooth import edge_midpoint_projector, pipeline_supports
     from .split import split_polygons
 
     _need(state, "split")
-    sup = pipeline_supports(state.mesh, state.locator, state.infos)
     before = state.mesh
+
+    def supports_and_projector():
+        s = pipeline_supports(before, state.locator, state.infos)
+        return s, edge_midpoint_projector(before, s)
+
+    # made in a second thread while split_polygons builds and solves its LP (HiGHS releases the
+    # GIL): the same values as made before it, 30 ms sooner on the target case
+    made = _Background(supports_and_projector)
     mesh, res = split_polygons(before, time_limit=state.options.split_time_limit,
-                               project=edge_midpoint_projector(before, sup))
+                               project=lambda points, parent_edges: made.result()[1](points, parent_edges))
+    sup = made.result()[0]
     # where no edge was split (the target case) the mesh is the same and so are its supports
     if not (_supports_hold(before, mesh) and np.array_equal(mesh.faces, before.faces)
             and np.array_equal(mesh.component, before.component)):

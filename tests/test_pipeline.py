@@ -414,6 +414,35 @@ def test_split_supports_are_those_of_its_mesh(remesh):
         assert getattr(again, name).tobytes() == getattr(st.supports, name).tobytes(), name
 
 
+@pytest.mark.parametrize("remesh", [True, False])
+def test_split_supports_are_made_beside_its_lp(monkeypatch, remesh):
+    """The supports before the split LP and the midpoint projector made of them come from a
+    second thread while the LP is built and solved: the split mesh is the one made with them
+    made first in the caller's thread, bit for bit (the wing without remesh splits edges, so
+    its new nodes go through the projector)."""
+    import threading
+
+    import shellmesh_mdao.smooth as sm
+    from shellmesh_mdao.split import split_polygons
+
+    st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="members", remesh=remesh).state
+    sup0 = sm.pipeline_supports(st.mesh, st.locator, st.infos)
+    eager, _ = split_polygons(st.mesh, time_limit=st.options.split_time_limit,
+                              project=sm.edge_midpoint_projector(st.mesh, sup0))
+    threads = []
+    real = sm.pipeline_supports
+
+    def recording(*a, **k):
+        threads.append(threading.get_ident())
+        return real(*a, **k)
+
+    monkeypatch.setattr(sm, "pipeline_supports", recording)
+    out = pl.run_stage(st, "split")
+    assert threads and threads[0] != threading.get_ident()
+    assert (out.report["split"]["n_split_edges"] > 0) == (not remesh)
+    assert out.mesh.points.tobytes() == eager.points.tobytes() and np.array_equal(out.mesh.faces, eager.faces)
+
+
 def test_merge_report_is_strict_json_without_a_gap(monkeypatch):
     """With the merge's valence term in blocks (a problem above merge.VALENCE_ONE_PIECE candidate
     edges) there is no global bound: the report's gap is null, not NaN, so the JSON report stays
