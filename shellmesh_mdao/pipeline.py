@@ -517,9 +517,11 @@ def stage_quad(state: PipelineState) -> PipelineState:
     off the input by at most ``planar_offset`` times the size (:func:`~shellmesh_mdao.quad.planarize`;
     report key ``planarize``). Where the warp p99 is above ``warp_goal`` after the final smoothing
     and that last move alone does not bring it to the goal, a second smoothing pass with the quad
-    planarity term runs first, around the quads that move left above the goal (``final_warp_weight``;
-    report key ``final_smooth.warp_term``); its result, moved the same way, is kept only if its warp
-    p99 is below the move alone's (``warp_term.kept``: ``"pass"`` or ``"planarize_alone"``)."""
+    planarity term runs, around the quads that move left above the goal (``final_warp_weight``;
+    report key ``final_smooth.warp_term``), from the move's mesh with the nodes it may move put back
+    where they were before the move; only those nodes are moved off the facets again after it
+    (:func:`_finish_region`), and the result is kept only if its warp p99 is below the move alone's
+    (``warp_term.kept``: ``"pass"`` or ``"planarize_alone"``)."""
     from .mesh import vertex_faces
     from .quad import subdivide_to_quads
     from .smooth import _face_rings, mesh_figures, smooth
@@ -565,6 +567,13 @@ def stage_quad(state: PipelineState) -> PipelineState:
             movable = np.unique(q.faces[region])
             movable = movable[movable >= 0]
             first = (q, res)
+            if trial is not None:
+                # the pass starts from the trial's mesh (settled, repaired, moved off the facets),
+                # the region's nodes back where they were before the move: outside the region the
+                # trial's result stands, and only the region is settled and moved again after it
+                start = tm.points.copy()
+                start[movable] = trial["before_planar"].points[movable]
+                q = _with_points(q, start)
             q, res2 = smooth(q, sup, iterations=o.final_warp_iterations, energy=o.smooth_energy,
                              target_edge=state.size, ortho_weight=o.final_ortho_weight,
                              warp_weight=o.final_warp_weight, warp_from=o.warp_from, vertices=movable,
@@ -579,7 +588,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
             if trial is not None:
                 # the pass and the move after it must beat the move alone, else the move alone
                 # on the first pass's mesh is kept (its scaled Jacobians are the better ones)
-                done = _finish_quads(state, q, sup)
+                done = _finish_region(state, q, sup, movable, trial)
                 if done["planar"]["warp_p99_after"] >= trial["planar"]["warp_p99_after"]:
                     done, (q, res) = trial, first
                     res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, state.size))
@@ -613,6 +622,72 @@ def stage_quad(state: PipelineState) -> PipelineState:
     return st
 
 
+def _with_points(q: ShellMesh, points) -> ShellMesh:
+    return ShellMesh(points, q.faces, q.component, list(q.component_names), q.fixed_vertices, q.feature_edges,
+                     q.feature_edge_ids)
+
+
+def _repair_poor(q: ShellMesh, sup, sj):
+    """Elements at or below :data:`POOR_JACOBIAN` (scaled Jacobians ``sj`` of ``q``) repaired by
+    :func:`~shellmesh_mdao.smooth.untangle` on the two rings around them, kept if no worse.
+    Returns ``(q, sj, poor, repair)`` (``repair`` the report's figures, None without poor elements)."""
+    from .mesh import vertex_faces
+    from .smooth import _face_rings, untangle
+
+    poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    if not len(poor):
+        return q, sj, poor, None
+    # last resort: move the vertices within two rings of the poor elements along their supports
+    # (smooth.untangle: no element at or below the goal gets worse, none above falls to it)
+    vptr, vface = vertex_faces(q.faces, q.n_points)
+    region = _face_rings(q.faces, vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), 2)
+    q2, info = untangle(q, sup, goal=POOR_JACOBIAN + 0.1, faces=region)
+    sj2 = scaled_jacobian(q2.points, q2.faces)
+    repair = {"elements_before": int(len(poor)), "elements_after": int((sj2 <= POOR_JACOBIAN).sum()),
+              "min_before": float(sj.min()), "min_after": float(sj2.min()), "moves": int(info["moves"])}
+    n2 = int((sj2 <= POOR_JACOBIAN).sum())
+    if n2 <= len(poor) and (n2 < len(poor) or sj2.min() > sj.min()):
+        q, sj = q2, sj2
+        poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    return q, sj, poor, repair
+
+
+def _finish_region(state: PipelineState, q: ShellMesh, sup, movable, trial: dict) -> dict:
+    """:func:`_finish_quads` after the second pass, which started from the planarize trial's
+    mesh and moved only the nodes ``movable``: the elements at or below :data:`POOR_JACOBIAN`
+    repaired, then :func:`~shellmesh_mdao.quad.planarize` moving only ``movable`` (outside the
+    region the trial's move stands; the smoothing put the region's nodes on their supports, and
+    the trial settled the rest). ``before_planar``: the nodes that kept the trial's positions at
+    the trial's positions before its move. The same keys as :func:`_finish_quads`; ``planar``'s
+    ``moved`` and ``max_offset`` count the trial's moves that stand as well, and ``repair`` is
+    the trial's where the region needed none."""
+    from .quad import planarize
+
+    o = state.options
+    q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
+    held = np.ones(q.n_points, bool)
+    held[movable] = False
+    held &= (q.points == trial["mesh"].points).all(1)
+    bp = q.points.copy()
+    bp[held] = trial["before_planar"].points[held]
+    before_planar = _with_points(q, bp)
+    q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
+                          guard_jacobian=POOR_JACOBIAN + 0.1, vertices=movable)
+    if planar["applied"]:
+        sj = scaled_jacobian(q.points, q.faces)
+        poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    # the report counts every node off the facets in the result: the region's moves and the
+    # trial's that stand outside it ("nodes": the region's candidates and those)
+    step = norm_rows(q.points - bp, axis=1)
+    kept_out = int((step[held] > 0).sum())
+    planar.update(applied=bool(planar["applied"] or kept_out), nodes=int(planar["nodes"]) + kept_out,
+                  moved=int((step > 0).sum()), max_offset=float(step.max(initial=0.0)))
+    planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
+    # the trial's repair stands too (the pass started from its mesh)
+    return {"mesh": q, "sj": sj, "poor": poor, "repair": trial["repair"] if repair is None else repair,
+            "settled": trial["settled"], "before_planar": before_planar, "planar": planar}
+
+
 def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
     """The quad stage after its smoothing, on ``q``: skin nodes left off the surface settled,
     elements at or below :data:`POOR_JACOBIAN` repaired, then :func:`~shellmesh_mdao.quad.planarize`.
@@ -620,31 +695,14 @@ def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
     (``before_planar``: the mesh before planarize, whose nodes off the surface
     :func:`_off_surface` reports for the result the caller keeps); ``q`` and ``sup`` are not
     changed."""
-    from .mesh import vertex_faces
     from .quad import planarize, settle_off_surface
-    from .smooth import _face_rings, untangle
 
     o = state.options
     # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
     # been smoothed most of them can go onto it (the same settle, no element below the guard
     # made worse)
     q, settled = settle_off_surface(q, sup, tol=OFF_SURFACE_TOL, guard_jacobian=o.guard_jacobian)
-    sj = scaled_jacobian(q.points, q.faces)
-    poor = np.flatnonzero(sj <= POOR_JACOBIAN)
-    repair = None
-    if len(poor):
-        # last resort: move the vertices within two rings of the poor elements along their supports
-        # (smooth.untangle: no element at or below the goal gets worse, none above falls to it)
-        vptr, vface = vertex_faces(q.faces, q.n_points)
-        region = _face_rings(q.faces, vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), 2)
-        q2, info = untangle(q, sup, goal=POOR_JACOBIAN + 0.1, faces=region)
-        sj2 = scaled_jacobian(q2.points, q2.faces)
-        repair = {"elements_before": int(len(poor)), "elements_after": int((sj2 <= POOR_JACOBIAN).sum()),
-                  "min_before": float(sj.min()), "min_after": float(sj2.min()), "moves": int(info["moves"])}
-        n2 = int((sj2 <= POOR_JACOBIAN).sum())
-        if n2 <= len(poor) and (n2 < len(poor) or sj2.min() > sj.min()):
-            q, sj = q2, sj2
-            poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
     before_planar = q
     # quads still warped above the goal straddle kinks of the faceted input that no move along it
     # can flatten: their free skin nodes leave the facets by at most planar_offset * size

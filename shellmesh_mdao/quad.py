@@ -367,7 +367,7 @@ def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50, start=None, l
 def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_above: float = 10.0,
               local_fraction: float = 0.15, guard_jacobian: float = 0.3, iterations: int = 6,
               regularisation: float = 1e-3, rings: int = 2, aim: float | None = None, flat_angle: float = 0.5,
-              draped_angle: float = 60.0) -> tuple[ShellMesh, dict]:
+              draped_angle: float = 60.0, vertices=None) -> tuple[ShellMesh, dict]:
     """Flatten the skin quads warped more than ``warp_above`` degrees by moving SURFACE nodes
     along their vertex normal, off the input facets by at most ``max_offset`` (a length) and at
     most ``local_fraction`` times the mean edge of the quads around the node.
@@ -391,7 +391,8 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     Jacobian is at or below ``guard_jacobian`` gets worse, none above falls to it and none
     turns over: the offsets of the nodes of such an element are halved (ten times, then
     dropped). The result is kept only if fewer quads are warped above ``warp_above`` than
-    before. Same input, same offsets.
+    before. ``vertices``: ids of the nodes that may move (default None: every node the rules
+    above allow); the others keep their positions. Same input, same offsets.
 
     Returns ``(mesh, info)`` with ``info`` = ``{"applied", "nodes", "moved", "max_offset",
     "quads_above_before", "quads_above_after", "halvings", "warp_p99_before",
@@ -427,6 +428,8 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     cand = np.unique(F[region])
     cand = cand[(cand >= 0)]
     cand = cand[supports.kind[cand] == SURFACE]
+    if vertices is not None:
+        cand = np.intersect1d(cand, np.asarray(vertices, dtype=np.int64).reshape(-1))
     # the nodes of elements at or below guard_jacobian stay on the input (the guard below would
     # undo any move of theirs that lowers such an element further)
     low = np.unique(F[q0["scaled_jacobian"] <= guard_jacobian])

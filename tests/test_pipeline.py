@@ -298,16 +298,23 @@ def test_planarize_moves_free_skin_nodes_off_the_input_within_the_bound():
 def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
     """Where the planarize move alone misses warp_goal, the second final pass moves exactly the
     nodes of the faces within two rings of the quads that move left above the goal (it flattens
-    the others without the pass), and the report counts those quads (warp_term.seed_quads)."""
+    the others without the pass), and the report counts those quads (warp_term.seed_quads). The
+    pass starts from the trial's mesh with those nodes back where they were before the move;
+    the move after it moves only those nodes, so every other node keeps the trial's position."""
     import shellmesh_mdao.smooth as sm
     from shellmesh_mdao.mesh import vertex_faces
 
-    trials, passes = [], []
-    finish, smooth = pl._finish_quads, sm.smooth
+    trials, passes, regions = [], [], []
+    finish, region_finish, smooth = pl._finish_quads, pl._finish_region, sm.smooth
 
     def record_finish(state, q, sup):
         out = finish(state, q, sup)
         trials.append((q, out))
+        return out
+
+    def record_region(state, q, sup, movable, trial):
+        out = region_finish(state, q, sup, movable, trial)
+        regions.append((q, out))
         return out
 
     def record_smooth(mesh, supports, **kw):
@@ -316,12 +323,12 @@ def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
         return smooth(mesh, supports, **kw)
 
     monkeypatch.setattr(pl, "_finish_quads", record_finish)
+    monkeypatch.setattr(pl, "_finish_region", record_region)
     monkeypatch.setattr(sm, "smooth", record_smooth)
     res = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, options={"warp_goal": 5.0})
     wt = res.report["final_smooth"]["warp_term"]
-    assert wt["applied"] and len(passes) == 1 and len(trials) == 2
+    assert wt["applied"] and len(passes) == 1 and len(trials) == 1 and len(regions) == 1
     q, trial = trials[0]
-    assert passes[0][0] is q                                   # the pass starts from the first pass's mesh
     tm = trial["mesh"]
     seeds = element_quality(tm.points, tm.faces)["warp"] > 5.0
     assert wt["seed_quads"] == int(seeds.sum()) == trial["planar"]["quads_above_after"] > 0
@@ -335,6 +342,22 @@ def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
     assert np.array_equal(np.sort(passes[0][1]), expect) and wt["vertices"] == len(expect)
     # fewer than the old rule (every quad above warp_from in the first pass's mesh) would move
     assert (element_quality(q.points, q.faces)["warp"] > res.state.options.warp_from).sum() > seeds.sum()
+    # the pass's start: the trial's mesh, the region's nodes at their positions before its move
+    inside = np.zeros(q.n_points, bool)
+    inside[expect] = True
+    start = passes[0][0].points
+    assert np.array_equal(start[~inside], tm.points[~inside])
+    assert np.array_equal(start[inside], trial["before_planar"].points[inside])
+    assert not np.array_equal(start[inside], tm.points[inside])        # the trial had moved some of them
+    # the move after the pass: only the region's nodes; the rest keep the trial's positions, and
+    # the nodes reported as off the surface are measured where they were before any move
+    after, done = regions[0]
+    out = done["mesh"].points
+    assert np.array_equal(out[~inside], tm.points[~inside]) and not np.array_equal(out[inside], after.points[inside])
+    assert np.array_equal(done["before_planar"].points[~inside], trial["before_planar"].points[~inside])
+    assert np.array_equal(done["before_planar"].points[inside], after.points[inside])
+    if wt["kept"] == "pass":
+        assert res.mesh.points.tobytes() == out.tobytes()
 
 
 def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
@@ -342,8 +365,9 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
     planarize move is cheap and, where it meets warp_goal alone, keeps the better scaled
     Jacobians. So the quad stage tries it first on the first pass's mesh and keeps it when the
     warp p99 is then at or below the goal (the default on this wing: 13.0 -> 8.1 deg); otherwise
-    (warp_goal 5: 7.0 deg alone) it runs the pass on the first pass's mesh around the quads the
-    move left above the goal, then the move, and keeps that only when it beats the move alone
+    (warp_goal 5: 7.0 deg alone) it runs the pass around the quads the move left above the goal
+    (from the move's mesh, the pass's nodes put back), then the move on the pass's nodes, and
+    keeps that only when it beats the move alone
     (on this wing 7.6 deg: the move alone is kept; with the remesh's deviation passes on, 5.6
     against 6.8 deg, the pass). Each way of that rule is checked below whatever the wing's mesh,
     by reporting one side's warp worse than it is. The settle / repair / planarize tail changes
@@ -360,16 +384,17 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
         """The wing at warp_goal 5; with ``fake_call`` (1: the planarize trial, 2: the move after
         the pass) that call's warp p99 is reported as 1e9. Returns the result and the calls."""
         calls = []
-        orig = pl._finish_quads
+        orig, orig_region = pl._finish_quads, pl._finish_region
 
-        def finish(state, q, sup):
-            out = orig(state, q, sup)
+        def record(out):
             calls.append(out)
             if len(calls) == fake_call:
                 out = dict(out, planar=dict(out["planar"], warp_p99_after=1e9))
             return out
         with monkeypatch.context() as m:
-            m.setattr(pl, "_finish_quads", finish)
+            m.setattr(pl, "_finish_quads", lambda state, q, sup: record(orig(state, q, sup)))
+            m.setattr(pl, "_finish_region", lambda state, q, sup, movable, trial: record(
+                orig_region(state, q, sup, movable, trial)))
             r = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, options={"warp_goal": 5.0})
         return r, calls
 

@@ -296,6 +296,23 @@ def test_planarize_flattens_quads_across_facet_kinks_within_the_offset_bound():
         planarize(mesh, sup, max_offset=-1.0)
 
 
+def test_planarize_moves_only_the_vertices_it_is_given():
+    """``vertices`` restricts the move to those nodes (the quad stage's move after its second
+    smoothing pass, which touched only the pass's nodes): the nodes in the left half of the
+    strip move, none of the others; fewer quads above 10 degrees than before, as reported."""
+    h = 0.2
+    mesh, loc = _strip_quads(h, 30.0)
+    sup = derive_supports(mesh, loc)
+    left = np.flatnonzero(mesh.points[:, 0] < 0.5 * mesh.points[:, 0].max())
+    out, info = planarize(mesh, sup, max_offset=0.05 * h, vertices=left)
+    moved = np.flatnonzero(np.linalg.norm(out.points - mesh.points, axis=1) > 0)
+    assert info["applied"] and info["moved"] == len(moved) > 20 and np.isin(moved, left).all()
+    full, _ = planarize(mesh, sup, max_offset=0.05 * h)
+    assert (np.linalg.norm(full.points - mesh.points, axis=1) > 0).sum() > len(moved)
+    w = element_quality(out.points, out.faces)["warp"]
+    assert 0 < info["quads_above_after"] == int((w > 10).sum()) < info["quads_above_before"] == 74
+
+
 def test_planarize_keeps_what_it_cannot_improve():
     """Quads as wide as the 18-degree strips and turned 45 degrees from them: offsets of 0.05
     of the spacing cannot bring any quad below 10 degrees, so planarize hands the mesh back
