@@ -36,9 +36,9 @@ KKT system eq. 8 (``solver="kkt"`` assembles eq. 8 literally; a test checks they
 with a symmetric positive definite matrix ``T^T A T + diag(rho)`` of half the size. That
 matrix depends only on the mesh, the weights and the tangent frames, so it is built (and,
 with ``solver="lu"``, factorised as L D L^T by ``qdldl``) once and reused for
-``refresh`` steps, during which only the right-hand side changes; above
-:data:`AUTO_LU_MAX_UNKNOWNS` unknowns the default solves it by Jacobi-preconditioned CG
-instead (cheaper than the factorisation's fill-in, the regulariser keeps it well conditioned).
+``refresh`` steps, during which only the right-hand side changes; the default solves it by
+Jacobi-preconditioned CG to :data:`CG_RTOL` (the regulariser keeps it well conditioned; at that
+tolerance cheaper than the factorisation at every mesh size, see :data:`AUTO_LU_MAX_UNKNOWNS`).
 
 Each step is clipped per vertex to ``trust`` times the distance to the nearest other
 vertex (the paper's ``m D <= r``), the moved vertices are projected onto their supports,
@@ -80,16 +80,18 @@ FIXED, CURVE, PLANE, SURFACE = 0, 1, 2, 3
 KIND_NAMES = ("fixed", "curve", "plane", "surface")
 _NDOF = np.array([0, 1, 2, 2], dtype=np.int64)
 #: ``solver="auto"`` factorises with sparse LU up to this many unknowns and uses
-#: Jacobi-preconditioned CG above (splu's fill-in grows fast on surface meshes: 0.25 s at
-#: 20k unknowns, 2.7 s at 51k, against about 0.2 s for a CG solve at 51k).
-AUTO_LU_MAX_UNKNOWNS = 20000
+#: Jacobi-preconditioned CG above. 0: CG always. At :data:`CG_RTOL` 1e-3 the smoothing before
+#: subdivision takes 188 ms with CG against 215 ms with the factorisation on the target case
+#: (5.7k nodes), 41 against 42 ms on a 715-node wing; a factorisation's fill-in grows fast on
+#: surface meshes (splu: 0.25 s at 20k unknowns, 2.7 s at 51k).
+AUTO_LU_MAX_UNKNOWNS = 0
 
 #: relative residual at which the conjugate gradients stop. The solution is a trust-region step,
 #: clipped to ``trust`` times the distance to the nearest vertex and then line-searched, so
-#: solving it more finely buys nothing: on the target case's final smoothing (47k unknowns) 22
-#: iterations instead of the 36 that 1e-10 took, and the corpus's quality figures the same to four
-#: decimals (docs/optimisation.md).
-CG_RTOL = 1e-6
+#: solving it more finely buys nothing: on the target case's final smoothing (47k unknowns) 10-11
+#: iterations instead of the 21-22 that 1e-6 took (36 at 1e-10), the step within about 1e-3 of the
+#: exact one, and the corpus's quality figures the same to four decimals (docs/optimisation.md).
+CG_RTOL = 1e-3
 #: curves of at most this many segments are scanned whole by :meth:`CurveSet.closest` (a
 #: compiled loop); longer ones go through its KD-tree of segment midpoints (same answers)
 SCAN_SEGMENTS = 512
@@ -1160,7 +1162,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     tol : stop when the largest move of a step is below ``tol`` times the median edge.
     solver : ``"lu"`` (sparse L D L^T of the reduced system by qdldl, reused for ``refresh`` steps),
         ``"cg"`` (Jacobi-preconditioned CG on the same matrix), ``"auto"`` (LU up to
-        :data:`AUTO_LU_MAX_UNKNOWNS` unknowns, CG above) or ``"kkt"`` (eq. 8 assembled
+        :data:`AUTO_LU_MAX_UNKNOWNS` unknowns, 0: none; CG above) or ``"kkt"`` (eq. 8 assembled
         literally; small meshes only, for checks).
     figures : which of ``quality_before`` / ``quality_after`` (:func:`mesh_figures`, about
         20-50 ms each on 25k quads) to fill: ``"both"`` (default), ``"before"``, ``"after"`` or

@@ -13,7 +13,7 @@ from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.project import SurfaceLocator
 from shellmesh_mdao.quad import subdivide_to_quads
 from shellmesh_mdao.quality import scaled_jacobian
-from shellmesh_mdao.smooth import (CURVE, FIXED, PLANE, SURFACE, Curve, CurveSet, Supports, derive_supports,
+from shellmesh_mdao.smooth import (CG_RTOL, CURVE, FIXED, PLANE, SURFACE, Curve, CurveSet, Supports, derive_supports,
                                    polylines_from_edges, smooth)
 
 
@@ -169,7 +169,9 @@ def test_nullspace_solve_equals_literal_kkt_system():
     c, _ = smooth(mesh, sup, solver="cg", **kw)
     assert np.abs(a.points - mesh.points).max() > 1e-3
     assert np.allclose(a.points, b.points, atol=1e-9)
-    assert np.allclose(a.points, c.points, atol=1e-7)
+    # CG stops at a relative residual of CG_RTOL (1e-3): the step within a small multiple of it
+    step = np.abs(a.points - mesh.points).max()
+    assert np.abs(c.points - a.points).max() <= 10 * CG_RTOL * step
 
 
 def _notched_grid():
