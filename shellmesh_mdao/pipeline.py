@@ -86,9 +86,12 @@ class PipelineOptions:
                           or 6 cannot all be square. Default 0.5 (the corpus's skin mean scaled
                           Jacobian +0.004 to +0.008, docs/benchmarks.md); 0 turns it off.
     ``smooth_iterations`` trust-region steps of the smoothing QP before subdivision (default 10);
-                          ``final_iterations`` after it (default 8), ``final_warp_iterations`` in
+                          ``final_iterations`` after it (default 5), ``final_warp_iterations`` in
                           the second final pass with the quad planarity term (default 10; see
                           ``final_warp_weight``).
+    ``final_refresh``     steps of the final pass (``final_iterations``) between rebuilding its
+                          tangent frames, edge weights and matrix (``refresh`` of
+                          :func:`~shellmesh_mdao.smooth.smooth`; default 2, at least 1).
     ``guard_jacobian``    a subdivided element whose projected new nodes would bring its scaled
                           Jacobian to or below this keeps them at their linear position.
     ``smooth_energy``     energy of both smoothing passes: ``"squared"`` (default: edges aim at the
@@ -144,7 +147,8 @@ class PipelineOptions:
     merge_bonus: float = 1.0
     merge_valence_weight: float = 0.5
     smooth_iterations: int = 10
-    final_iterations: int = 8
+    final_iterations: int = 5
+    final_refresh: int = 2
     final_warp_iterations: int = 10
     guard_jacobian: float = 0.2
     smooth_jacobian: float = 0.4
@@ -184,6 +188,9 @@ class PipelineOptions:
             raise ShellMeshError(f"solver option 'planar_offset' must be at most 0.25 (a fraction of the size by "
                                  f"which skin nodes may leave the input to flatten warped quads), got "
                                  f"{out['planar_offset']!r}")
+        if out.get("final_refresh", 2) < 1:
+            raise ShellMeshError(f"solver option 'final_refresh' must be at least 1 (steps between rebuilding the "
+                                 f"final pass's frames and matrix), got {out['final_refresh']!r}")
         if not 0 < out.get("smooth_warp_spread", 75.0) <= 180:
             raise ShellMeshError(f"solver option 'smooth_warp_spread' must be in (0, 180] degrees, got "
                                  f"{out['smooth_warp_spread']!r}")
@@ -534,7 +541,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
     if o.final_iterations:
         # the first pass's figures after it are taken only if no second pass follows
         q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size,
-                        ortho_weight=o.final_ortho_weight, figures="before")
+                        ortho_weight=o.final_ortho_weight, refresh=o.final_refresh, figures="before")
         # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
         # where the warp p99 acceptance is missed and the planarize move alone cannot meet it
         wq = warp(q.points, q.faces)
