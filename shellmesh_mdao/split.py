@@ -338,7 +338,9 @@ def _highs_solve(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, integer: bool, 
 
 
 #: fewest columns the smaller half of an LP needs before :func:`_highs_solve_halves` solves it in
-#: a thread of its own (a thread and a second HiGHS set-up cost about a millisecond)
+#: a thread of its own (a thread and its HiGHS scheduler cost about 0.2 ms: a 2-column LP 0.53 ms
+#: in a new thread against 0.31 ms in the caller's; the row-column components about 5 ms at 24k
+#: columns)
 LP_HALF_MIN = 2000
 
 
