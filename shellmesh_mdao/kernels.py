@@ -1885,10 +1885,9 @@ def nearest_other_distance(P, verts, cell: float | None = None):
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
     verts = np.ascontiguousarray(verts, dtype=np.int64).reshape(-1)
     n = len(P)
-    if len(verts):
-        _check_index("verts", verts, n)
     if not len(verts):
         return np.zeros(0)
+    _check_index("verts", verts, n)
     if not np.isfinite(P).all():
         raise ValueError("nearest_other_distance: points must be finite")
     lo = P.min(0)

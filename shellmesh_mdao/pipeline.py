@@ -445,7 +445,8 @@ def stage_split(state: PipelineState) -> PipelineState:
         return s, edge_midpoint_projector(before, s)
 
     # made in a second thread while split_polygons builds and solves its LP (HiGHS releases the
-    # GIL): the same values as made before it, 30 ms sooner on the target case
+    # GIL): the same values as made before it (the target case's split stage 0.154 -> 0.139 s,
+    # docs/benchmarks.md, fifteenth pass)
     made = _Background(supports_and_projector)
     mesh, res = split_polygons(before, time_limit=state.options.split_time_limit,
                                project=lambda points, parent_edges: made.result()[1](points, parent_edges))
@@ -659,6 +660,22 @@ def _repair_poor(q: ShellMesh, sup, sj):
     return q, sj, poor, repair
 
 
+def _planarize(state: PipelineState, q: ShellMesh, sup, sj, poor, vertices=None):
+    """The quad stage's :func:`~shellmesh_mdao.quad.planarize` move on ``q`` (scaled Jacobians
+    ``sj``, poor elements ``poor``), moving only ``vertices`` if given. Returns ``(q, planar, sj,
+    poor)``, ``planar`` the report's figures (with the offset over the size and its bound)."""
+    from .quad import planarize
+
+    o = state.options
+    q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
+                          guard_jacobian=POOR_JACOBIAN + 0.1, vertices=vertices)
+    planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
+    if planar["applied"]:
+        sj = scaled_jacobian(q.points, q.faces)
+        poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    return q, planar, sj, poor
+
+
 def _finish_region(state: PipelineState, q: ShellMesh, sup, movable, trial: dict) -> dict:
     """:func:`_finish_quads` after the second pass, which started from the planarize trial's
     mesh and moved only the nodes ``movable``: the elements at or below :data:`POOR_JACOBIAN`
@@ -668,9 +685,6 @@ def _finish_region(state: PipelineState, q: ShellMesh, sup, movable, trial: dict
     the trial's positions before its move. The same keys as :func:`_finish_quads`; ``planar``'s
     ``moved`` and ``max_offset`` count the trial's moves that stand as well, and ``repair`` is
     the trial's where the region needed none."""
-    from .quad import planarize
-
-    o = state.options
     q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
     held = np.ones(q.n_points, bool)
     held[movable] = False
@@ -678,18 +692,14 @@ def _finish_region(state: PipelineState, q: ShellMesh, sup, movable, trial: dict
     bp = q.points.copy()
     bp[held] = trial["before_planar"].points[held]
     before_planar = _with_points(q, bp)
-    q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
-                          guard_jacobian=POOR_JACOBIAN + 0.1, vertices=movable)
-    if planar["applied"]:
-        sj = scaled_jacobian(q.points, q.faces)
-        poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+    q, planar, sj, poor = _planarize(state, q, sup, sj, poor, vertices=movable)
     # the report counts every node off the facets in the result: the region's moves and the
     # trial's that stand outside it ("nodes": the region's candidates and those)
     step = norm_rows(q.points - bp, axis=1)
     kept_out = int((step[held] > 0).sum())
     planar.update(applied=bool(planar["applied"] or kept_out), nodes=int(planar["nodes"]) + kept_out,
                   moved=int((step > 0).sum()), max_offset=float(step.max(initial=0.0)))
-    planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
+    planar.update(max_offset_over_size=planar["max_offset"] / state.size)
     # the trial's repair stands too (the pass started from its mesh)
     return {"mesh": q, "sj": sj, "poor": poor, "repair": trial["repair"] if repair is None else repair,
             "settled": trial["settled"], "before_planar": before_planar, "planar": planar}
@@ -702,7 +712,7 @@ def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
     (``before_planar``: the mesh before planarize, whose nodes off the surface
     :func:`_off_surface` reports for the result the caller keeps); ``q`` and ``sup`` are not
     changed."""
-    from .quad import planarize, settle_off_surface
+    from .quad import settle_off_surface
 
     o = state.options
     # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
@@ -715,12 +725,7 @@ def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
     # can flatten: their free skin nodes leave the facets by at most planar_offset * size
     planar = None
     if o.planar_offset > 0:
-        q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
-                              guard_jacobian=POOR_JACOBIAN + 0.1)
-        planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
-        if planar["applied"]:
-            sj = scaled_jacobian(q.points, q.faces)
-            poor = np.flatnonzero(sj <= POOR_JACOBIAN)
+        q, planar, sj, poor = _planarize(state, q, sup, sj, poor)
     return {"mesh": q, "sj": sj, "poor": poor, "repair": repair, "settled": settled, "before_planar": before_planar,
             "planar": planar}
 

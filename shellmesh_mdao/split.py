@@ -378,11 +378,11 @@ def _highs_solve_halves(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, time_lim
     the sum; ``seconds`` the wall time of the whole."""
     from .kernels import _Background
 
+    t0 = time.perf_counter()
     A = sparse.csr_matrix(A)
     halves = _independent_halves(A) if A.shape[1] >= 2 * LP_HALF_MIN else None
     if halves is None or min(len(h[0]) for h in halves) < LP_HALF_MIN:
         return _highs_solve(c, A, row_lo, row_hi, ub, integer=False, time_limit=time_limit)
-    t0 = time.perf_counter()
     c, row_lo, row_hi, ub = (np.asarray(a, dtype=np.float64) for a in (c, row_lo, row_hi, ub))
     (c0, r0), (c1, r1) = halves
     other = _Background(lambda: _highs_solve(c[c1], A[r1][:, c1], row_lo[r1], row_hi[r1], ub[c1], integer=False,
