@@ -781,7 +781,28 @@ def _split_at_surface_midpoints(P, T, C, e, locator):
     return P, T, C, new_id
 
 
-def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4) -> ShellMesh:
+def chain_depths(chains) -> np.ndarray:
+    """The depth of the member section each chain bounds: the median distance from the
+    chain's exact arc points to the nearest of the other arcs of its member (a rib's upper
+    chain: the rib's local height). inf for a chain without an arc or without another arc on
+    its member."""
+    depth = np.full(len(chains), np.inf)
+    for ci, c in enumerate(chains):
+        if c.arc is None or not len(c.arc.points):
+            continue
+        d = None
+        for cj, o in enumerate(chains):
+            if cj == ci or o.member != c.member or o.arc is None or len(o.arc.points) < 2:
+                continue
+            dj = norm_rows(closest_on_polyline(c.arc.points, o.arc.points, o.arc.closed) - c.arc.points, axis=1)
+            d = dj if d is None else np.minimum(d, dj)
+        if d is not None:
+            depth[ci] = float(np.median(d))
+    return depth
+
+
+def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4,
+                  depth_fraction: float = 0.0) -> ShellMesh:
     """Split chain edges whose exact arc bulges more than ``max_deviation`` from the chord, at
     the arc point farthest from it (on the input surface and the member plane); both skin
     triangles on the edge are split, and a feature edge on it becomes two. Up to ``rounds``
@@ -789,14 +810,25 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
     ``vertices`` is updated in place (new vertices appended to the mesh, inserted in order);
     new vertices are fixed.
 
+    With ``depth_fraction`` above 0 a chain's bound is also at most that fraction of its
+    member's depth there (:func:`chain_depths`): a chord bulging ``s`` from its arc over a
+    length ``c`` cuts off about ``2/3 s c`` of the section, so with ``s`` at most ``f`` times
+    the depth ``d`` the member's two chains of length ``L`` lose at most about ``4/3 f d L``,
+    ``4/3 f`` of an area ``d L`` (1 % at ``f`` 0.0075), however thin the section is against
+    the element size.
+
     A chain whose vertices are snapped skin vertices has chords as long as the skin's edges;
     on a curved section they cut off area (bwb's thin outer wing: a rib 1.05 % smaller than
     its exact section). The pipeline runs this when the solver option ``chain_deviation`` is
-    above 0 (a fraction of the remesh edge length; default 0.01)."""
+    above 0 (a fraction of the remesh edge length; default 0.01), with ``depth_fraction``
+    the option ``chain_depth_deviation`` (default 0.0075)."""
     P, T, C = mesh.points.copy(), mesh.faces[:, :3].copy(), mesh.component.copy()
     fe = np.sort(np.asarray(mesh.feature_edges, np.int64).reshape(-1, 2), axis=1)
     fid = np.asarray(mesh.feature_edge_ids).copy()
     fixed = list(np.asarray(mesh.fixed_vertices, np.int64))
+    bound = np.full(len(chains), float(max_deviation))
+    if depth_fraction > 0:
+        bound = np.minimum(bound, float(depth_fraction) * chain_depths(chains))
     for _ in range(rounds):
         edges, xs, w_chain, w_pos = [], [], [], []
         for ci, c in enumerate(chains):
@@ -823,7 +855,7 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
             first = np.ones(len(o), bool)
             first[1:] = k[j][o][1:] != k[j][o][:-1]
             o = o[first]
-            sel = o[d[o] > max_deviation]
+            sel = o[d[o] > bound[ci]]
             if not len(sel):
                 continue
             e = k[j][sel]                      # chain edge (in the ordered chain) to split

@@ -370,6 +370,57 @@ def test_refine_chains_bounds_the_chord_deviation(imprinted):
     assert set(new.tolist()) <= set(ref.fixed_vertices.tolist())
 
 
+def test_chain_depths_are_the_distance_to_the_members_other_arc():
+    """chain_depths: a rib's upper chain 0.3 above its lower one (an arc with a bump in the
+    middle) has the median distance of its points to the lower arc as depth; a chain alone on
+    its member, or without an arc, has none (inf)."""
+    from shellmesh_mdao.imprint import ChainResult, chain_depths
+    from shellmesh_mdao.section import SectionArc
+
+    x = np.linspace(0, 1, 11)
+    up = np.stack([x, np.zeros(11), 0.3 + 0.05 * (np.abs(x - 0.5) < 0.15)], 1)
+    lo = np.stack([x[::2], np.zeros(6), np.zeros(6)], 1)
+
+    def chain(member, side, pts):
+        return ChainResult(member, side, np.arange(2), None if pts is None else
+                           SectionArc(pts, np.zeros(len(pts) - 1, np.int64), False))
+
+    depth = chain_depths([chain("rib", "upper", up), chain("rib", "lower", lo), chain("spar", "upper", up),
+                          chain("rib", "upper", None)])
+    assert depth[0] == pytest.approx(0.3)                 # 3 of 11 points on the bump: the median is 0.3
+    assert depth[1] == pytest.approx(0.3)
+    assert np.isinf(depth[2]) and np.isinf(depth[3])
+
+
+def test_refine_chains_bounds_the_deviation_by_the_member_depth(imprinted):
+    """With depth_fraction f, refine_chains also splits until no chain edge bulges more than f
+    times its member's depth from its exact section (with the length bound off): so the area a
+    member loses to its chords is a bounded fraction of its area however thin the section is
+    against the element size."""
+    import copy
+
+    from shellmesh_mdao.imprint import chain_depths, refine_chains
+
+    m, chains, out, res = imprinted
+    depth = chain_depths(res)
+    assert np.isfinite(depth).sum() >= 4, "the fixture must have members with two chains"
+
+    def worst(mesh, rr):
+        return np.array([np.linalg.norm(closest_on_polyline(r.arc.points, mesh.points[r.vertices]) - r.arc.points,
+                                        axis=1).max() for r in rr])
+
+    before = worst(out, res)
+    f = 0.25 * float(np.median((before / depth)[np.isfinite(depth) & (before > 0)]))
+    assert (before > f * depth).sum() >= 4, "the fixture must have chains to refine"
+    res2 = copy.deepcopy(res)
+    ref = refine_chains(out, res2, np.inf, depth_fraction=f)
+    after = worst(ref, res2)
+    assert (after <= f * depth * (1 + 1e-9)).all(), (after / depth).max()
+    assert ref.check().ok and ref.is_closed()
+    res3 = copy.deepcopy(res)                            # off (0): nothing to split without a length bound
+    assert refine_chains(out, res3, np.inf).n_points == out.n_points
+
+
 def test_chain_deviation_option_refines_the_pipeline_chains():
     """Solver option chain_deviation (fraction of the remesh edge length; default 0.01, 0 = off)
     runs refine_chains in the imprint stage: more chain vertices, chords closer to the exact
@@ -377,14 +428,16 @@ def test_chain_deviation_option_refines_the_pipeline_chains():
     from shellmesh_mdao.pipeline import REMESH_FACTOR, PipelineOptions, run_pipeline
 
     assert PipelineOptions().chain_deviation == 0.01
+    assert PipelineOptions().chain_depth_deviation == 0.0075
     assert PipelineOptions.from_dict({"chain_deviation": 0.01}).chain_deviation == 0.01
-    with pytest.raises(Exception, match="chain_deviation"):
-        PipelineOptions.from_dict({"chain_deviation": -1})
+    for name in ("chain_deviation", "chain_depth_deviation"):
+        with pytest.raises(Exception, match=name):
+            PipelineOptions.from_dict({name: -1})
     m = naca_wing(n_chord=30, n_span=25)
     lay = naca_wing_layout()
     size = 0.15
     runs = [run_pipeline(m, lay, size, until="imprint", progress=False, options=o)
-            for o in ({"chain_deviation": 0}, {"chain_deviation": 0.002})]
+            for o in ({"chain_deviation": 0, "chain_depth_deviation": 0}, {"chain_deviation": 0.002})]
 
     def worst(r):
         return max(np.linalg.norm(closest_on_polyline(c.arc.points, r.mesh.points[c.vertices]) - c.arc.points,
