@@ -918,14 +918,19 @@ def _scatter(data, indptr, aoff, col_start, ncol, u, v, e, B, bu, bv, f):
 
 
 @njit(cache=True, nogil=True)
-def _hessian_values(indptr, aoff, dslot, pslot, qslot, col_start, ncol, tv, pu, pv, pw, quads, on, osu, osv, osw,
-                    fo, wrow, wm, wsw, fw, rho):
-    data = np.zeros(indptr[indptr.shape[0] - 1], np.float64)
+def _hessian_values(data, indptr, aoff, dslot, pslot, qslot, col_start, ncol, tv, pu, pv, pw, quads, on, osu, osv,
+                    osw, fo, wrow, wm, wsw, fw, rho, v0, v1):
+    """Adds the Hessian's values into the rows of the vertices ``v0 <= x < v1`` of ``data``
+    (zeros): every entry gets the same terms in the same order whatever the range, so two
+    calls on two ranges in two threads give the bits of one call on all vertices."""
     G = np.zeros((6, 6), np.float64)
     # edge pairs: pw (e_u - e_v)(e_u - e_v)^T (x) I in the tangent columns: the Gram matrix of
     # the two vertices' tangent vectors, +pw on the own blocks and -pw on the mixed ones
     for e in range(pu.shape[0]):
         u, v = pu[e], pv[e]
+        inu, inv = v0 <= u < v1, v0 <= v < v1
+        if not (inu or inv):
+            continue
         for r in range(2):
             x = u if r == 0 else v
             for c in range(ncol[x]):
@@ -934,20 +939,30 @@ def _hessian_values(indptr, aoff, dslot, pslot, qslot, col_start, ncol, tv, pu, 
                     for c2 in range(ncol[y]):
                         i, j = col_start[x] + c, col_start[y] + c2
                         G[3 * r + c, 3 * r2 + c2] = tv[i, 0] * tv[j, 0] + tv[i, 1] * tv[j, 1] + tv[i, 2] * tv[j, 2]
-        if ncol[u] > 0:
+        if ncol[u] > 0 and inu:
             _scatter(data, indptr, aoff, col_start, ncol, u, u, dslot[u], G, 0, 0, pw[e])
-        if ncol[v] > 0:
+        if ncol[v] > 0 and inv:
             _scatter(data, indptr, aoff, col_start, ncol, v, v, dslot[v], G, 3, 3, pw[e])
         if pslot[e, 0] >= 0:
-            _scatter(data, indptr, aoff, col_start, ncol, u, v, pslot[e, 0], G, 0, 3, -pw[e])
-            _scatter(data, indptr, aoff, col_start, ncol, v, u, pslot[e, 1], G, 3, 0, -pw[e])
+            if inu:
+                _scatter(data, indptr, aoff, col_start, ncol, u, v, pslot[e, 0], G, 0, 3, -pw[e])
+            if inv:
+                _scatter(data, indptr, aoff, col_start, ncol, v, u, pslot[e, 1], G, 3, 0, -pw[e])
     # the quads: orthogonality corners (rows sqrt(w) M_role tv of roles a, b, c, as in
     # ortho_jacobian) and planarity rows (sigma_k sw (m_k . tv)), summed per quad into a
-    # 12 x 12 block over its four vertices' columns, then added to the matrix
+    # 12 x 12 block over its four vertices' columns (the rows of the corners in the range
+    # only), then added to the matrix
     B = np.zeros((12, 12), np.float64)
     J = np.zeros((12, 3), np.float64)
     Jw = np.zeros(12, np.float64)
+    mine = np.zeros(4, np.bool_)
     for q in range(quads.shape[0]):
+        anyin = False
+        for i in range(4):
+            mine[i] = v0 <= quads[q, i] < v1
+            anyin = anyin or mine[i]
+        if not anyin:
+            continue
         B[:, :] = 0.0
         if on.shape[0]:
             for kk in range(4):
@@ -969,6 +984,8 @@ def _hessian_values(indptr, aoff, dslot, pslot, qslot, col_start, ncol, tv, pu, 
                         J[3 * lv + c, 0], J[3 * lv + c, 1], J[3 * lv + c, 2] = j0 * sw, j1 * sw, j2 * sw
                 for r in range(3):
                     lv = (kk + r + 3) % 4
+                    if not mine[lv]:
+                        continue
                     x = quads[q, lv]
                     for r2 in range(3):
                         lv2 = (kk + r2 + 3) % 4
@@ -987,6 +1004,8 @@ def _hessian_values(indptr, aoff, dslot, pslot, qslot, col_start, ncol, tv, pu, 
                     Jw[3 * kk + c] = sg * wsw[w] * (wm[w, kk, 0] * tv[col, 0] + wm[w, kk, 1] * tv[col, 1]
                                                     + wm[w, kk, 2] * tv[col, 2])
             for kk in range(4):
+                if not mine[kk]:
+                    continue
                 x = quads[q, kk]
                 for k2 in range(4):
                     y = quads[q, k2]
@@ -994,16 +1013,17 @@ def _hessian_values(indptr, aoff, dslot, pslot, qslot, col_start, ncol, tv, pu, 
                         for c2 in range(ncol[y]):
                             B[3 * kk + c, 3 * k2 + c2] += fw * (Jw[3 * kk + c] * Jw[3 * k2 + c2])
         for i in range(4):
+            if not mine[i]:
+                continue
             for j in range(4):
                 if qslot[q, i, j] >= 0:
                     _scatter(data, indptr, aoff, col_start, ncol, quads[q, i], quads[q, j], qslot[q, i, j], B, 3 * i,
                              3 * j, 1.0)
     # the regulariser on the diagonal
-    for u in range(ncol.shape[0]):
+    for u in range(v0, v1):
         if ncol[u] > 0:
             for c in range(ncol[u]):
                 data[indptr[col_start[u] + c] + aoff[dslot[u]] + c] += rho[col_start[u] + c]
-    return data
 
 
 class ReducedHessian:
@@ -1043,11 +1063,18 @@ class ReducedHessian:
                                                                             self.col_start)
         self.dslot, self.pslot, self.qslot = _hessian_slots(vptr, vadj, self.pu, self.pv, self.quads, self.ncol)
 
-    def values(self, tv, pw, rho, ortho=None, fo=1.0, warp=None, fw=1.0):
+    #: fewest matrix entries :meth:`values` fills in two threads (each takes the rows of half
+    #: the entries; the same bits as one)
+    MIN_THREADED = 100_000
+
+    def values(self, tv, pw, rho, ortho=None, fo=1.0, warp=None, fw=1.0, threads: int | None = None):
         """The CSR data for the pattern. ``pw`` (one per pair), ``rho`` (k,); ``ortho``:
         ``(n, su, sv, sw)`` of the ``4 m`` corners (``sw`` the weights' roots) or None;
         ``warp``: ``(qi, m (len(qi), 4, 3), sw (len(qi),))`` of the quads ``quads[qi]`` or
-        None; ``fo``, ``fw`` the factors of the two quad terms."""
+        None; ``fo``, ``fw`` the factors of the two quad terms. With ``threads`` above 1
+        (default: numba's thread count, the CPUs this process may use) and at least
+        :attr:`MIN_THREADED` entries, two threads fill the rows of two vertex ranges (the
+        compiled loop releases the GIL); the values are the same bits either way."""
         tv = np.ascontiguousarray(tv, dtype=np.float64).reshape(-1, 3)
         pw = np.ascontiguousarray(pw, dtype=np.float64).reshape(-1)
         rho = np.ascontiguousarray(rho, dtype=np.float64).reshape(-1)
@@ -1072,9 +1099,23 @@ class ReducedHessian:
             if len(wm) != len(qi) or len(wsw) != len(qi) or len(np.unique(qi)) != len(qi):
                 raise ValueError("the planarity term needs distinct quads, each with one m and one sw")
             wrow[qi] = np.arange(len(qi))
-        return _hessian_values(self.indptr, self.aoff, self.dslot, self.pslot, self.qslot, self.col_start, self.ncol,
-                               tv, self.pu, self.pv, pw, self.quads, on, osu, osv, osw, float(fo), wrow, wm, wsw,
-                               float(fw), rho)
+        data = np.zeros(self.indptr[-1], np.float64)
+        args = (data, self.indptr, self.aoff, self.dslot, self.pslot, self.qslot, self.col_start, self.ncol, tv, self.pu,
+                self.pv, pw, self.quads, on, osu, osv, osw, float(fo), wrow, wm, wsw, float(fw), rho)
+        n = len(self.ncol)
+        if threads is None:
+            from numba import config
+            threads = int(config.NUMBA_NUM_THREADS)
+        if threads > 1 and len(data) >= self.MIN_THREADED:
+            # the vertices split where half of the entries are: their rows in one thread each
+            row_end = self.indptr[self.col_start + self.ncol]          # each vertex's rows end here
+            mid = int(np.searchsorted(row_end, len(data) // 2))
+            other = _Background(_hessian_values, *args, mid, n)
+            _hessian_values(*args, 0, mid)
+            other.result()
+        else:
+            _hessian_values(*args, 0, n)
+        return data
 
     def matrix(self, data):
         from scipy import sparse

@@ -274,6 +274,11 @@ def test_reduced_hessian_matches_the_scipy_products(seed):
     got = H.toarray()
     assert np.allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
     assert np.array_equal(got, got.T)
+    # two threads, each filling the rows of one vertex range: the same bits as one
+    hess.MIN_THREADED = 0
+    d1 = hess.values(tv, pw, rho, ortho=(n, su, sv, sw), fo=fo, warp=(np.flatnonzero(wsel), wm, wsw), fw=fw, threads=1)
+    d2 = hess.values(tv, pw, rho, ortho=(n, su, sv, sw), fo=fo, warp=(np.flatnonzero(wsel), wm, wsw), fw=fw, threads=2)
+    assert np.array_equal(d1, H.data) and np.array_equal(d2, H.data)
     # the pattern: every nonzero of the reference is in it, and only couplings of pairs and quads
     Hp = sparse.csr_matrix((np.ones(H.nnz), H.indices, H.indptr), shape=(k, k)).toarray() > 0
     assert (ref[~Hp] == 0).all()
