@@ -1100,8 +1100,8 @@ class ReducedHessian:
                 raise ValueError("the planarity term needs distinct quads, each with one m and one sw")
             wrow[qi] = np.arange(len(qi))
         data = np.zeros(self.indptr[-1], np.float64)
-        args = (data, self.indptr, self.aoff, self.dslot, self.pslot, self.qslot, self.col_start, self.ncol, tv, self.pu,
-                self.pv, pw, self.quads, on, osu, osv, osw, float(fo), wrow, wm, wsw, float(fw), rho)
+        args = (data, self.indptr, self.aoff, self.dslot, self.pslot, self.qslot, self.col_start, self.ncol, tv,
+                self.pu, self.pv, pw, self.quads, on, osu, osv, osw, float(fo), wrow, wm, wsw, float(fw), rho)
         n = len(self.ncol)
         if threads is None:
             from numba import config
