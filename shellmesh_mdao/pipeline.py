@@ -91,7 +91,7 @@ class PipelineOptions:
                           or 6 cannot all be square. Default 0.5 (the corpus's skin mean scaled
                           Jacobian +0.004 to +0.008, docs/benchmarks.md); 0 turns it off.
     ``smooth_iterations`` trust-region steps of the smoothing QP before subdivision (default 10);
-                          ``final_iterations`` after it (default 5), ``final_warp_iterations`` in
+                          ``final_iterations`` after it (default 4), ``final_warp_iterations`` in
                           the second final pass with the quad planarity term (default 10; see
                           ``final_warp_weight``).
     ``final_refresh``     steps of the final pass (``final_iterations``) between rebuilding its
@@ -153,7 +153,7 @@ class PipelineOptions:
     merge_bonus: float = 1.0
     merge_valence_weight: float = 0.5
     smooth_iterations: int = 10
-    final_iterations: int = 5
+    final_iterations: int = 4
     final_refresh: int = 2
     final_warp_iterations: int = 10
     guard_jacobian: float = 0.2

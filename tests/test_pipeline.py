@@ -165,12 +165,12 @@ def test_stage_order_and_options_errors():
 
 
 def test_final_pass_refreshes_every_final_refresh_steps(monkeypatch):
-    """The final pass (final_iterations steps, default 5) rebuilds its frames, weights and matrix
-    every final_refresh steps (default 2): 3 matrices for 5 steps, 5 with final_refresh 1."""
+    """The final pass (final_iterations steps, default 4) rebuilds its frames, weights and matrix
+    every final_refresh steps (default 2): 2 matrices for 4 steps, 4 with final_refresh 1."""
     import shellmesh_mdao.smooth as sm
 
     o = pl.PipelineOptions()
-    assert (o.final_iterations, o.final_refresh) == (5, 2)
+    assert (o.final_iterations, o.final_refresh) == (4, 2)
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="smooth").state
     seen = []
     real = sm.smooth
@@ -185,7 +185,7 @@ def test_final_pass_refreshes_every_final_refresh_steps(monkeypatch):
     pl.run_stage(st, "quad")
     pl.run_stage(st.but(options=dataclasses.replace(o, final_refresh=1)), "quad")
     assert seen[0][0] == 2 and seen[1][0] == 1
-    assert seen[0][1] == seen[1][1] == 5 and (seen[0][2], seen[1][2]) == (3, 5)
+    assert seen[0][1] == seen[1][1] == 4 and (seen[0][2], seen[1][2]) == (2, 4)
 
 
 def _chain_side_edges(res):
