@@ -116,6 +116,41 @@ def test_split_thin_limits_fans():
     assert ang.min() >= 15.0 and len(P3) == len(P) + k - 1
 
 
+def test_split_thin_keeps_fans_at_a_fixed_apex_open():
+    """A ladder split of a thin chain edge (the opposite side's vertices at x = 0.4 and 0.5 across
+    it) would cut the 90-degree apex angles of both skin faces into 33.7, 11.3 and 45 degrees:
+    above the imprint's 10-degree floor, so it is taken while the apex may move. When the apex
+    is a fixed skin vertex (a chain's crossing with a crease: the final quad at that corner keeps
+    the angle, and a quad with an 11.3-degree corner has a scaled Jacobian of at most 0.196) no
+    fan triangle may have an angle there below min_fan_angle (15): the best single ladder point
+    (x = 0.5, 45 and 45 degrees) is taken instead (cessna210 stress seed 41: a 10.5-degree corner
+    at a rib's trailing-edge crossing, a final quad of 0.183)."""
+    from types import SimpleNamespace
+
+    P = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 0.5, 0], [0.5, -0.5, 0],
+                  [0.0, -0.05, 0], [0.4, -0.05, 0], [0.5, -0.05, 0], [1.0, -0.05, 0]])
+    F = np.array([[0, 1, 2], [1, 0, 3]])
+    C = np.zeros(2, np.int32)
+    FE, FID = np.array([[0, 1]]), np.zeros(1, np.int32)
+
+    def split(fixed):                                       # one round: the first split only
+        m = SimpleNamespace(sides=[np.array([0, 1]), np.array([4, 5, 6, 7])],
+                            side_arcs=[np.array([[0.0, 0, 0], [1.0, 0, 0]]), None], name="m")
+        P2, F2, *_ = _split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1, rounds=1, fixed=fixed)
+        return P2[len(P):], P2, F2
+
+    free = np.zeros(len(P), bool)
+    new, _, _ = split(free)
+    assert np.allclose(np.sort(new[:, 0]), [0.4, 0.5])
+    fixed = free.copy()
+    fixed[[2, 3]] = True
+    new, P2, F2 = split(fixed)
+    assert np.allclose(new[:, 0], [0.5]) and len(F2) == 4
+    apex = np.isin(F2, [2, 3])
+    ang = element_quality(P2, F2)["min_angle"]
+    assert ang.min() >= 15.0 and apex.any(1).all()
+
+
 def _run_draw(geometry_dir, manifest, seed, geometry, options=None):
     c = SL.draw_case(seed, geometry, manifest=manifest)
     lay = layout_from_manifest(manifest, geometry, ribs=list(c["ribs"]), spars=list(c["spars"]))

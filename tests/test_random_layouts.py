@@ -132,3 +132,16 @@ def test_bwb_sweep_layouts_found_by_the_imprint_fixes(manifest, geometry_dir, se
         return
     assert r["outcome"] == "ok", f"{case}: {r['outcome']} at stage {r['stage']}: {r['reason']}: {r['error']}"
     assert r["min_sj"] > 0.2 and r["n_poor"] == 0
+
+
+@pytest.mark.slow
+def test_cessna210_sweep_layout_with_a_rib_crossing_the_trailing_edge(manifest, geometry_dir):
+    """cessna210 seed 41 of the 192-seed sweep (18 ribs 1.73 element sizes apart, one spar, size
+    0.507): rib_2's chain crosses the trailing-edge crease at a fixed skin vertex whose 38-degree
+    corner in one bay a ladder split of rib_3's thin chain edge cut into 17.2, 10.5 and 10.3
+    degrees; the 10.5-degree corner stayed in a final quad of scaled Jacobian 0.183 (members stage,
+    fixed apexes keep min_fan_angle). It must meet every guarantee."""
+    case = SL.draw_case(41, "cessna210", manifest=manifest, geometry_dir=geometry_dir)
+    r = SL.run_case(case, geometry_dir, manifest)
+    assert r["outcome"] == "ok", f"{case}: {r['outcome']} at stage {r['stage']}: {r['reason']}: {r['error']}"
+    assert r["min_sj"] > 0.2 and r["n_poor"] == 0
