@@ -811,7 +811,8 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
     new vertices are fixed.
 
     With ``depth_fraction`` above 0 a chain's bound is also at most that fraction of its
-    member's depth there (:func:`chain_depths`): a chord bulging ``s`` from its arc over a
+    member's depth (:func:`chain_depths`: the median distance from the chain's arc to the
+    member's other chain, one figure per chain): a chord bulging ``s`` from its arc over a
     length ``c`` cuts off about ``2/3 s c`` of the section, so with ``s`` at most ``f`` times
     the depth ``d`` the member's two chains of length ``L`` lose at most about ``4/3 f d L``,
     ``4/3 f`` of an area ``d L`` (1 % at ``f`` 0.0075), however thin the section is against
