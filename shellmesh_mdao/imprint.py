@@ -787,16 +787,17 @@ def chain_depths(chains) -> np.ndarray:
     chain: the rib's local height). inf for a chain without an arc or without another arc on
     its member."""
     depth = np.full(len(chains), np.inf)
+    by_member: dict = {}
+    for ci, c in enumerate(chains):                    # a few chains per member
+        by_member.setdefault(c.member, []).append(ci)
     for ci, c in enumerate(chains):
         if c.arc is None or not len(c.arc.points):
             continue
-        d = None
-        for cj, o in enumerate(chains):
-            if cj == ci or o.member != c.member or o.arc is None or len(o.arc.points) < 2:
-                continue
-            dj = norm_rows(closest_on_polyline(c.arc.points, o.arc.points, o.arc.closed) - c.arc.points, axis=1)
-            d = dj if d is None else np.minimum(d, dj)
-        if d is not None:
+        others = [chains[cj].arc for cj in by_member[c.member]
+                  if cj != ci and chains[cj].arc is not None and len(chains[cj].arc.points) >= 2]
+        if others:
+            d = np.min([norm_rows(closest_on_polyline(c.arc.points, o.points, o.closed) - c.arc.points, axis=1)
+                        for o in others], axis=0)
             depth[ci] = float(np.median(d))
     return depth
 

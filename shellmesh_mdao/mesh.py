@@ -316,6 +316,12 @@ class ShellMesh:
             return 0.0
         return bbox_diagonal(self.points)
 
+    def with_points(self, points) -> "ShellMesh":
+        """The same mesh (faces, components, fixed vertices, feature edges: shared, not copied)
+        on other ``points`` (n_points, 3): a smoothing's or a projection's result."""
+        return ShellMesh(points, self.faces, self.component, list(self.component_names), self.fixed_vertices,
+                         self.feature_edges, self.feature_edge_ids)
+
     def copy(self) -> "ShellMesh":
         return ShellMesh(self.points.copy(), self.faces.copy(), self.component.copy(),
                          list(self.component_names), self.fixed_vertices.copy(),

@@ -587,7 +587,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
                 # trial's result stands, and only the region is settled and moved again after it
                 start = tm.points.copy()
                 start[movable] = trial["before_planar"].points[movable]
-                q = _with_points(q, start)
+                q = q.with_points(start)
             q, res2 = smooth(q, sup, iterations=o.final_warp_iterations, energy=o.smooth_energy,
                              target_edge=state.size, ortho_weight=o.final_ortho_weight,
                              warp_weight=o.final_warp_weight, warp_from=o.warp_from, vertices=movable,
@@ -634,11 +634,6 @@ def stage_quad(state: PipelineState) -> PipelineState:
                     "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
                     len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
     return st
-
-
-def _with_points(q: ShellMesh, points) -> ShellMesh:
-    return ShellMesh(points, q.faces, q.component, list(q.component_names), q.fixed_vertices, q.feature_edges,
-                     q.feature_edge_ids)
 
 
 def _repair_poor(q: ShellMesh, sup, sj):
@@ -697,7 +692,7 @@ def _finish_region(state: PipelineState, q: ShellMesh, sup, movable, trial: dict
     held &= (q.points == trial["mesh"].points).all(1)
     bp = q.points.copy()
     bp[held] = trial["before_planar"].points[held]
-    before_planar = _with_points(q, bp)
+    before_planar = q.with_points(bp)
     q, planar, sj, poor = _planarize(state, q, sup, sj, poor, vertices=movable)
     # the report counts every node off the facets in the result: the region's moves and the
     # trial's that stand outside it ("nodes": the region's candidates and those)

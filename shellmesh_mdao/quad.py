@@ -115,8 +115,7 @@ def _settle(mesh: ShellMesh, supports: Supports, nodes, X_proj, parent_normal, t
     q_g = _face_quality(Pg[Fc], is_tri, nref)
     P1 = Pg.copy()
     P1[nodes] = X_proj
-    m1 = ShellMesh(P1, F, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
-                   mesh.feature_edges, mesh.feature_edge_ids)
+    m1 = mesh.with_points(P1)
     # the faces around the projected nodes (two rings: room for the tangential moves)
     vptr, vface = vertex_faces(F, len(Pg))
     region = _face_rings(F, vptr, vface, nodes, 2)
@@ -260,8 +259,7 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
         k = np.flatnonzero(kept)
         pts = _settle(out, sup, n + k, x[k], fn[parent], guard_jacobian, guard_jacobian + 0.1,
                       settle_iterations)
-        out = ShellMesh(pts, out.faces, out.component, out.component_names, out.fixed_vertices,
-                        out.feature_edges, out.feature_edge_ids)
+        out = out.with_points(pts)
     return out, sup
 
 
@@ -307,15 +305,12 @@ def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6
                 x[~ok], _ = supports.project(pts, off[~ok])
         else:
             x, _ = supports.project(pts, off)
-        pts = _settle(ShellMesh(pts, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
-                                mesh.feature_edges, mesh.feature_edge_ids),
-                      supports, off, x, own, guard_jacobian, guard_jacobian + 0.1, iterations)
+        pts = _settle(mesh.with_points(pts), supports, off, x, own, guard_jacobian, guard_jacobian + 0.1, iterations)
         d2 = supports.distance(pts, off)
         off = off[d2 > lim]
         if not len(off):
             break
-    out = ShellMesh(pts, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
-                    mesh.feature_edges, mesh.feature_edge_ids)
+    out = mesh.with_points(pts)
     d2 = supports.distance(pts, skin)
     info.update(after=int((d2 > lim).sum()), max_distance_after=float(d2.max(initial=0.0)))
     return out, info
@@ -523,8 +518,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     above = int((quad & (w > warp_above)).sum())
     if above >= len(warped):
         return mesh, info
-    out = ShellMesh(X, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
-                    mesh.feature_edges, mesh.feature_edge_ids)
+    out = mesh.with_points(X)
     info.update(applied=True, nodes=int(len(cand)), moved=int((t != 0).sum()), max_offset=float(np.abs(t).max()),
                 quads_above_after=above, halvings=halvings, warp_p99_after=float(np.percentile(w[quad], 99)))
     return out, info

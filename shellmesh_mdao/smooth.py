@@ -1351,8 +1351,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         P = X
         if move < tol * scale:
             break
-    out = ShellMesh(P, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
-                    mesh.feature_edges, mesh.feature_edge_ids)
+    out = mesh.with_points(P)
     res = SmoothResult(iterations=it, seconds=time.perf_counter() - t0, max_move=max(moves, default=0.0),
                        n_step_halvings=halvings, n_rejected=rejected, factorisations=nfact, moves=moves,
                        n_fold_hits=n_fold, n_jump_hits=n_jump, quality_before=before,
@@ -1557,8 +1556,7 @@ def untangle(mesh: ShellMesh, supports: Supports, *, goal: float = 0.3, iteratio
     info["iterations"] = it
     info["min_after"] = float(q[region].min(initial=np.inf))
     info["n_bad_after"] = int((q[region] <= goal).sum())
-    out = ShellMesh(P, mesh.faces, mesh.component, list(mesh.component_names), mesh.fixed_vertices,
-                    mesh.feature_edges, mesh.feature_edge_ids)
+    out = mesh.with_points(P)
     return out, info
 
 

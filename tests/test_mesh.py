@@ -314,3 +314,20 @@ def test_unique_edges_matches_numpys_row_unique():
         got = unique_edges(a, b)
         assert got.dtype == np.int64 and np.array_equal(got, ref)
     assert unique_edges([], []).shape == (0, 2)
+
+
+def test_with_points_keeps_everything_but_the_points():
+    """ShellMesh.with_points: the same faces, components, names, fixed vertices and feature
+    edges (ids included) on new points; the original is unchanged."""
+    P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0]], float)
+    m = ShellMesh(P, np.array([[0, 1, 2, 3], [1, 4, 2, -1]]), np.array([0, 1]), ["a", "b"], [0, 4],
+                  np.array([[0, 1], [1, 4]]), np.array([1, -1]))
+    Q = P + np.array([0.0, 0.0, 1.0])
+    m2 = m.with_points(Q)
+    assert np.array_equal(m2.points, Q) and np.array_equal(m.points, P)
+    assert np.array_equal(m2.faces, m.faces) and np.array_equal(m2.component, m.component)
+    assert m2.component_names == ["a", "b"] and np.array_equal(m2.fixed_vertices, [0, 4])
+    assert np.array_equal(m2.feature_edges, m.feature_edges)
+    assert np.array_equal(m2.feature_edge_ids, m.feature_edge_ids)
+    with pytest.raises(MeshValidationError):
+        m.with_points(P[:3])                            # faces index points 3 and 4
