@@ -1580,7 +1580,7 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
         # only where the cut changed the skin or the skin is poor: the rest is the remesh's, which
         # the imprint did not touch (rounds over the whole skin cost 0.3 s more on cessna210 for
         # the same figures, docs/benchmarks.md)
-        from .smooth import _face_rings
+        from .core.topology import face_rings
 
         ptr, vf = vertex_faces(T, len(P))
         active = np.zeros(len(P), bool)
@@ -1588,7 +1588,7 @@ def improve_skin(mesh: ShellMesh, locator, chains=(), rounds: int = 12, min_gain
                         (np.unique(T[_tri_angles_min(P, T) < poor_angle]), 1)):
             active[seed] = True
             if r > 0:
-                active[T[_face_rings(T, ptr, vf, seed, r)]] = True
+                active[T[face_rings(T, ptr, vf, seed, r)]] = True
         movable &= active
     chain_nb = _chain_neighbours(len(P), chain_vs, arcs)
     hint = np.full(len(P), -1, np.int64)            # each vertex's input triangle, once projected

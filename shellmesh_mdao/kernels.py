@@ -32,6 +32,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .core.threads import Background as _Background
+
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
            "corner_max_turn", "segments_scan", "segments_within", "pair_difference", "min_corner_sj", "face_quality",
@@ -1944,35 +1946,6 @@ def nearest_other_distance(P, verts, cell: float | None = None):
         cell *= 1.25
     return _grid_nearest_other(P, verts, lo, cell, dims)
 
-
-class _Background:
-    """``fn(*args)`` in a thread of its own from now on; :meth:`result` waits for its value (or
-    raises its exception). For work that releases the GIL (a KD-tree query, a compiled
-    ``nogil`` loop) beside work in the caller's thread; the value is the same as a call in the
-    caller's. One short-lived thread per call rather than a shared ``concurrent.futures``
-    pool: a pool's idle worker does not survive a ``fork`` (a study's multiprocessing pool),
-    and the child's ``submit`` would wait for it forever. (Used by the smoothing's trust
-    radius and :meth:`TriangleBVH.closest`.)"""
-
-    def __init__(self, fn, *args):
-        self._out: list = []
-
-        def run():
-            try:
-                self._out.append((True, fn(*args)))
-            except BaseException as exc:          # handed to the caller by result()
-                self._out.append((False, exc))
-
-        import threading
-        self._thread = threading.Thread(target=run, daemon=True)
-        self._thread.start()
-
-    def result(self):
-        self._thread.join()
-        ok, value = self._out[0]
-        if not ok:
-            raise value
-        return value
 
 
 class TriangleBVH:

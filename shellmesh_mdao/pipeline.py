@@ -439,7 +439,7 @@ def _supports_hold(before: ShellMesh, after: ShellMesh) -> bool:
 def stage_split(state: PipelineState) -> PipelineState:
     """Splitting LP (paper eq. 1-3) on the whole mesh; chains, junctions and feature lines are
     never split. Derives the node supports (input skin, member planes, feature curves)."""
-    from .kernels import _Background
+    from .core.threads import Background
     from .smooth import edge_midpoint_projector, pipeline_supports
     from .split import split_polygons
 
@@ -453,7 +453,7 @@ def stage_split(state: PipelineState) -> PipelineState:
     # made in a second thread while split_polygons builds and solves its LP (HiGHS releases the
     # GIL): the same values as made before it (the target case's split stage 0.154 -> 0.139 s,
     # docs/benchmarks.md, fifteenth pass)
-    made = _Background(supports_and_projector)
+    made = Background(supports_and_projector)
     mesh, res = split_polygons(before, time_limit=state.options.split_time_limit,
                                project=lambda points, parent_edges: made.result()[1](points, parent_edges))
     sup = made.result()[0]
@@ -538,7 +538,8 @@ def stage_quad(state: PipelineState) -> PipelineState:
     (``warp_term.kept``: ``"pass"`` or ``"planarize_alone"``)."""
     from .mesh import vertex_faces
     from .quad import subdivide_to_quads
-    from .smooth import _face_rings, mesh_figures, smooth
+    from .core.topology import face_rings
+    from .smooth import mesh_figures, smooth
 
     _need(state, "quad")
     o = state.options
@@ -577,7 +578,7 @@ def stage_quad(state: PipelineState) -> PipelineState:
                 seeds = wq > o.warp_from
             warp_term["seed_quads"] = int(seeds.sum())
             warped = np.unique(q.faces[seeds])
-            region = _face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
+            region = face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
             movable = np.unique(q.faces[region])
             movable = movable[movable >= 0]
             first = (q, res)
@@ -641,7 +642,8 @@ def _repair_poor(q: ShellMesh, sup, sj):
     :func:`~shellmesh_mdao.smooth.untangle` on the two rings around them, kept if no worse.
     Returns ``(q, sj, poor, repair)`` (``repair`` the report's figures, None without poor elements)."""
     from .mesh import vertex_faces
-    from .smooth import _face_rings, untangle
+    from .core.topology import face_rings
+    from .smooth import untangle
 
     poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     if not len(poor):
@@ -649,7 +651,7 @@ def _repair_poor(q: ShellMesh, sup, sj):
     # last resort: move the vertices within two rings of the poor elements along their supports
     # (smooth.untangle: no element at or below the goal gets worse, none above falls to it)
     vptr, vface = vertex_faces(q.faces, q.n_points)
-    region = _face_rings(q.faces, vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), 2)
+    region = face_rings(q.faces, vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), 2)
     q2, info = untangle(q, sup, goal=POOR_JACOBIAN + 0.1, faces=region)
     sj2 = scaled_jacobian(q2.points, q2.faces)
     repair = {"elements_before": int(len(poor)), "elements_after": int((sj2 <= POOR_JACOBIAN).sum()),

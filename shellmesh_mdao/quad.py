@@ -32,10 +32,11 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
+from .core.topology import face_rings
 from .errors import MeshValidationError
 from .mesh import ShellMesh, cross_rows, vertex_faces, norm_rows
 from .quality import element_quality
-from .smooth import (CURVE, FIXED, SURFACE, Supports, _LDL, _draped_vertices, _face_normals, _face_quality, _face_rings,
+from .smooth import (CURVE, FIXED, SURFACE, Supports, _LDL, _draped_vertices, _face_normals, _face_quality,
                      _min_corner_sj, _support_normals, untangle)
 
 __all__ = ["subdivide_to_quads", "subdivide_faces", "settle_off_surface", "planarize"]
@@ -118,7 +119,7 @@ def _settle(mesh: ShellMesh, supports: Supports, nodes, X_proj, parent_normal, t
     m1 = mesh.with_points(P1)
     # the faces around the projected nodes (two rings: room for the tangential moves)
     vptr, vface = vertex_faces(F, len(Pg))
-    region = _face_rings(F, vptr, vface, nodes, 2)
+    region = face_rings(F, vptr, vface, nodes, 2)
     m2, _ = untangle(m1, supports, goal=goal, iterations=iterations, faces=region, ref_normals=nref)
     P2 = m2.points.copy()
     while True:
@@ -419,7 +420,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
         return mesh, info
     n = mesh.n_points
     vptr, vface = vertex_faces(F, n)
-    region = _face_rings(F, vptr, vface, np.unique(F[warped][F[warped] >= 0]), rings)
+    region = face_rings(F, vptr, vface, np.unique(F[warped][F[warped] >= 0]), rings)
     cand = np.unique(F[region])
     cand = cand[(cand >= 0)]
     cand = cand[supports.kind[cand] == SURFACE]
@@ -434,7 +435,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     # its nodes by coordinate), and a node of a face draped over an edge sharper than
     # draped_angle (its corners' facets turned further apart: not a kink of a faceted curve)
     if len(cand):
-        near = _face_rings(F, vptr, vface, cand, 1)
+        near = face_rings(F, vptr, vface, cand, 1)
         verts = np.unique(F[near])
         verts = verts[verts >= 0]
         nrm = np.zeros((n, 3))
@@ -442,7 +443,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
         draped = _draped_vertices(F[near], nrm, draped_angle)
         bent = _draped_vertices(F[near], nrm, flat_angle)
         cand = cand[bent[cand] & ~draped[cand]]
-    rq = _face_rings(F, vptr, vface, cand, 1)
+    rq = face_rings(F, vptr, vface, cand, 1)
     rq = rq[quad[rq]]
     Q = F[rq, :4]
     # local size: mean edge of the residual quads at each node
@@ -458,7 +459,7 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     col[cand] = np.arange(len(cand))
     # the vertex normals from the faces at the nodes only: each node's sum runs over the same
     # faces in the same order as over the whole mesh (the same bits)
-    faces_at = _face_rings(F, vptr, vface, cand, 1)
+    faces_at = face_rings(F, vptr, vface, cand, 1)
     nu = ShellMesh(P, F[faces_at]).vertex_normals()[cand]
     D = 0.5 * (norm_rows(P[Q[:, 2]] - P[Q[:, 0]], axis=1) + norm_rows(P[Q[:, 3]] - P[Q[:, 1]], axis=1))
     t = np.zeros(len(cand))

@@ -64,7 +64,9 @@ from scipy.sparse import linalg as spla
 from scipy.spatial import cKDTree
 
 from .errors import MeshValidationError, ProjectionError
-from .kernels import (ReducedHessian, _Background, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
+from .core.threads import Background
+from .core.topology import face_rings, faces_of
+from .kernels import (ReducedHessian, chain_walk, closest_on_curves, corner_max_turn, corner_sums,
                       element_normals, face_quality, faces_at, min_corner_sj, nearest_other_distance,
                       ortho_gradient, ortho_jacobian, pair_difference)
 from .mesh import (ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, edge_topology, norm_rows,
@@ -880,20 +882,6 @@ def _solve_kkt(K3, rho_v, mesh_n, g, supports, T, owner):
     return sol[:3 * n].reshape(n, 3)
 
 
-def _faces_of(ptr, vf, verts, m):
-    """Sorted ids of the faces incident to ``verts`` (CSR ``ptr``/``vf`` of ``m`` faces; a
-    compiled pass, :func:`~shellmesh_mdao.kernels.faces_at`)."""
-    return faces_at(ptr, vf, verts, m)
-
-
-def _face_rings(faces, ptr, vf, verts, rings: int = 2):
-    """Sorted ids of the faces within ``rings`` rings of ``verts``: the faces incident to
-    them, then (``rings`` >= 2) the faces incident to those faces' vertices, and so on."""
-    region = _faces_of(ptr, vf, np.asarray(verts, np.int64), len(faces))
-    for _ in range(rings - 1):
-        v = faces[region]
-        region = _faces_of(ptr, vf, np.unique(v[v >= 0]), len(faces))
-    return region
 
 
 class _LDL:
@@ -1214,7 +1202,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         # same order (pairs, quads and faces keep their order). A draped face (warp_spread) needs
         # two corners with a support normal, i.e. movable ones, so it is among these faces too.
         # The same bits as over the whole mesh, for the cost of the region
-        act = _faces_of(vptr, vface, movable, len(faces))
+        act = faces_of(vptr, vface, movable, len(faces))
         faces, is_tri = faces[act], is_tri[act]
         vptr, vface = vertex_faces(faces, n)
         E = edge_topology(faces).edges
@@ -1237,7 +1225,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         # trust region: distance to the nearest other vertex, from a grid of cubes of >= 1.5 median
         # edges in a second thread while this one refreshes and solves (it depends on P alone;
         # the grid's cell sets the speed only: a KD-tree query's values)
-        near = _Background(nearest_other_distance, P, movable, 1.5 * scale)
+        near = Background(nearest_other_distance, P, movable, 1.5 * scale)
         if (it - 1) % refresh == 0:
             vn, kap = _vertex_normals_and_curvature(P, faces, is_tri, n)
             T, owner, nrm, tv = _frames(mesh, P, supports, vn)
@@ -1303,7 +1291,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         D[movable] = Dm
         # line search with per-vertex step factors
         todo = movable[_norm(D[movable]) > 0]
-        fsel = _faces_of(vptr, vface, todo, len(faces))
+        fsel = faces_of(vptr, vface, todo, len(faces))
         nref = _face_normals(P, faces[fsel], is_tri[fsel])
         sj_old = np.full(len(faces), np.inf)
         sj_old[fsel] = _min_corner_sj(P, faces[fsel], is_tri[fsel], nref)
@@ -1326,7 +1314,7 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                 X[live] = x
                 badv = live[~ok | jump]
                 n_jump += len(badv)
-            fs = _faces_of(vptr, vface, todo, len(faces))
+            fs = faces_of(vptr, vface, todo, len(faces))
             sj_new = _min_corner_sj(X, faces[fs], is_tri[fs], nref_all[fs])
             badf = fs[(~np.isfinite(sj_new) | (sj_new <= min_jacobian)) & (sj_new < sj_old[fs] - 1e-12)]
             fv = faces[badf]
@@ -1478,7 +1466,7 @@ def untangle(mesh: ShellMesh, supports: Supports, *, goal: float = 0.3, iteratio
                 break
         # candidates: movable vertices of the bad faces and of the faces around them
         v0 = np.unique(F[bad][F[bad] >= 0])
-        ring = _faces_of(vptr, vface, v0, m)
+        ring = faces_of(vptr, vface, v0, m)
         cand = np.unique(F[ring][F[ring] >= 0])
         cand = cand[movable[cand]]
         if not len(cand):
@@ -1551,7 +1539,7 @@ def untangle(mesh: ShellMesh, supports: Supports, *, goal: float = 0.3, iteratio
         go = imp[~lose[imp]]
         P[cand[go]] = Yp[go, best_k[go]]
         info["moves"] += len(go)
-        fs = _faces_of(vptr, vface, cand[go], m)
+        fs = faces_of(vptr, vface, cand[go], m)
         q[fs] = quality(fs)
     info["iterations"] = it
     info["min_after"] = float(q[region].min(initial=np.inf))

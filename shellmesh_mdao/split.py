@@ -367,7 +367,7 @@ def _highs_solve_halves(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, time_lim
     objective, though where the optimum is not unique another optimal vertex may come out.
     Status "Optimal" when both halves are optimal, else the first other status; the objective
     the sum; ``seconds`` the wall time of the whole."""
-    from .kernels import _Background
+    from .core.threads import Background
 
     t0 = time.perf_counter()
     A = sparse.csr_matrix(A)
@@ -376,7 +376,7 @@ def _highs_solve_halves(c, A: sparse.csr_matrix, row_lo, row_hi, ub, *, time_lim
         return _highs_solve(c, A, row_lo, row_hi, ub, integer=False, time_limit=time_limit)
     c, row_lo, row_hi, ub = (np.asarray(a, dtype=np.float64) for a in (c, row_lo, row_hi, ub))
     (c0, r0), (c1, r1) = halves
-    other = _Background(lambda: _highs_solve(c[c1], A[r1][:, c1], row_lo[r1], row_hi[r1], ub[c1], integer=False,
+    other = Background(lambda: _highs_solve(c[c1], A[r1][:, c1], row_lo[r1], row_hi[r1], ub[c1], integer=False,
                                              time_limit=time_limit))
     s0 = _highs_solve(c[c0], A[r0][:, c0], row_lo[r0], row_hi[r0], ub[c0], integer=False, time_limit=time_limit)
     s1 = other.result()

@@ -249,7 +249,7 @@ def test_improve_skin_rounds_work_near_the_chains_and_the_poor_triangles_only():
     is the remesh's, which the cut did not change. A sliver far from the chain is still improved;
     with ``rings=None`` the rounds cover the whole skin (and move vertices far from the chain)."""
     from shellmesh_mdao.mesh import vertex_faces
-    from shellmesh_mdao.smooth import _face_rings
+    from shellmesh_mdao.core.topology import face_rings
 
     n = 24
     skin = _roof(n)
@@ -267,8 +267,8 @@ def test_improve_skin_rounds_work_near_the_chains_and_the_poor_triangles_only():
     ang = _tri_angles_min(mesh.points, T)
     ptr, vf = vertex_faces(T, mesh.n_points)
     region = np.zeros(mesh.n_points, bool)
-    region[T[_face_rings(T, ptr, vf, chains[0].vertices, 3)]] = True          # 3 rings of the chain
-    region[T[_face_rings(T, ptr, vf, np.unique(T[ang < 30.0]), 1)]] = True    # 1 ring of the poor
+    region[T[face_rings(T, ptr, vf, chains[0].vertices, 3)]] = True          # 3 rings of the chain
+    region[T[face_rings(T, ptr, vf, np.unique(T[ang < 30.0]), 1)]] = True    # 1 ring of the poor
     assert region[far] and not region.all() and (ang[(T == far).any(1)] < 30.0).any()
     out = improve_skin(copy.deepcopy(mesh), loc, copy.deepcopy(chains))
     assert out.n_points == mesh.n_points                        # no repair needed: same vertices

@@ -194,9 +194,10 @@ def test_manifest_wings_are_valid_layout_wings(manifest):
         lay = layout_from_manifest(manifest, g, ribs=10, spars=[0.15, 0.65])
         specs = lay.members()
         assert len(specs) == 12 * len(geo["wings"])
-        up = np.asarray(geo["up"], float)
+        ups = {w["name"]: np.asarray(w.get("up", geo["up"]), float) for w in geo["wings"]}
         for m in specs:
-            assert abs(m.plane_normal @ up) < 1e-12
+            # every member plane contains its wing's up direction (a wing may give its own)
+            assert abs(m.plane_normal @ ups[m.wing]) < 1e-12
     # bwb: up is y and span is z, so rib normals are along +-z
     lay = layout_from_manifest(manifest, "bwb", ribs=3, spars=[])
     for m in lay.members():

@@ -703,7 +703,7 @@ def test_trust_radius_query_in_its_own_thread():
     second thread: the distances are a brute-force scan's, coincident points give 0, and an
     exception in the thread reaches the caller."""
     from shellmesh_mdao.kernels import nearest_other_distance
-    from shellmesh_mdao.smooth import _Background
+    from shellmesh_mdao.core.threads import Background
 
     rng = np.random.default_rng(5)
     P = rng.normal(size=(400, 3))
@@ -711,12 +711,12 @@ def test_trust_radius_query_in_its_own_thread():
     verts = np.arange(0, 400, 3)
     d = np.linalg.norm(P[verts, None, :] - P[None, :, :], axis=2)
     d[np.arange(len(verts)), verts] = np.inf
-    job = _Background(nearest_other_distance, P, verts)
+    job = Background(nearest_other_distance, P, verts)
     got = job.result()
     assert np.allclose(got, d.min(1), rtol=0, atol=1e-12) and got[1] == 0.0
     assert job.result() is got                             # asked twice, one value
     with pytest.raises(ValueError, match="verts holds indices outside"):
-        _Background(nearest_other_distance, P, np.array([400])).result()
+        Background(nearest_other_distance, P, np.array([400])).result()
 
 
 def test_ldl_reuses_the_ordering_with_the_same_bits():
