@@ -115,11 +115,15 @@ def test_seed_selects_wing_not_other_body(wing):
 def test_corpus_sections_exact(geometry_dir, manifest):
     import trimesh
 
+    from shellmesh_mdao.load import load_surface
+
     for name, g in manifest["geometries"].items():
-        m = trimesh.load(geometry_dir / g["file"], process=True)
-        P, T = np.asarray(m.vertices), np.asarray(m.faces)
-        up = np.asarray(g["up"], float)
+        # every format of the corpus (STL, VTK, IGES through gmsh) read as the pipeline reads it
+        skin, _ = load_surface(geometry_dir / g["file"])
+        P, T = skin.points, skin.faces[:, :3]
+        m = trimesh.Trimesh(P, T, process=False)
         w = g["wings"][0]
+        up = np.asarray(w.get("up", g["up"]), float)
         rle, rte, tle, tte = (np.asarray(w[k], float) for k in ("root_le", "root_te", "tip_le", "tip_te"))
         span = (tle + tte) / 2 - (rle + rte) / 2
         span -= (span @ up) * up
