@@ -10,7 +10,7 @@ from shellmesh_mdao.errors import OutputError
 from shellmesh_mdao.export import (DEFAULT_MATERIAL, DEFAULT_THICKNESS, bdf_family_name, export_order,
                                    inp_elset_names, inp_mesh_lines, resolve_thickness, write_mesh)
 import shellmesh_mdao.export as export_mod
-import shellmesh_mdao.load as load_mod
+import shellmesh_mdao.load.readers as load_readers
 from shellmesh_mdao.load import load_mesh, load_surface
 from shellmesh_mdao.mesh import ShellMesh
 
@@ -181,7 +181,7 @@ def test_bdf_pynastran_fallback_reads_same_mesh(tmp_path, monkeypatch):
     m = mixed_mesh()
     path = write_mesh(m, tmp_path / "m.bdf")
     fast = load_mesh(path)
-    monkeypatch.setattr(load_mod, "_read_own_bdf", lambda p: None)
+    monkeypatch.setattr(load_readers, "_read_own_bdf", lambda p: None)
     slow = load_mesh(path)
     assert np.array_equal(fast.points, slow.points)
     assert np.array_equal(fast.faces, slow.faces)
@@ -195,7 +195,7 @@ def test_bdf_fast_reader_rejects_edited_file(tmp_path):
     text = path.read_text().replace("$ Shell element data for family rib_1\n",
                                     "$ Shell element data for family rib_1\nCBAR    99       1       1       2\n")
     path.write_text(text)
-    assert load_mod._read_own_bdf(path) is None
+    assert load_readers._read_own_bdf(path) is None
 
 
 # ------------------------------------------------------------------ CalculiX

@@ -454,7 +454,7 @@ def test_counting_sorts_give_numpy_stable_argsort(seed):
 
 
 def _lexsort_ranks(prio, tie):
-    """The ranks remesh._rank took from numpy before the radix sort."""
+    """The ranks remesh.common.rank_candidates took from numpy before the radix sort."""
     order = np.lexsort((tie, -np.asarray(prio)))
     r = np.empty(len(prio), np.int64)
     r[order] = np.arange(len(prio), 0, -1)
@@ -467,7 +467,7 @@ def test_rank_desc_gives_the_lexsort_ranks(kind):
     broken by the key), infinities and both zeros, subnormals, exponents across the whole
     range; the remesh's hashed ids and full 64-bit keys."""
     from shellmesh_mdao.kernels import rank_desc
-    from shellmesh_mdao.remesh import _hash
+    from shellmesh_mdao.remesh.common import _hash
     rng = np.random.default_rng(900 + kind)
     for _ in range(40):
         n = int(rng.integers(0, 3000))
@@ -728,7 +728,8 @@ def test_triangle_angle_kernels_give_the_numpy_angles(k):
     since numpy's vector loops treat the tail of an array apart)."""
     from shellmesh_mdao import kernels as K
     from shellmesh_mdao.imprint import _angles3
-    from shellmesh_mdao.remesh import _tri_angles, _tri_min_angle, _tri_normals
+    from shellmesh_mdao.remesh.common import tri_angles as _tri_angles, tri_min_angle as _tri_min_angle
+    from shellmesh_mdao.remesh.common import tri_normals as _tri_normals
 
     rng = np.random.default_rng(100 + k)
     P = rng.normal(size=(3 * k, 3)) * 10.0 ** rng.uniform(-3, 3)
@@ -786,9 +787,10 @@ def test_facing_ok_matches_the_einsum_test(seed):
 
 def _old_collapse_geometric(a, b, okd, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri,
                             tri_n, cos_facing):
-    """The numpy formulas of remesh._collapse_edges' geometric tests (non-quality mode) before
+    """The numpy formulas of remesh.operations.collapse_edges' geometric tests (non-quality mode) before
     the kernel, on the pairs the length test allows."""
-    from shellmesh_mdao.remesh import _expand, _norm, _tri_min_angle, _unit
+    from shellmesh_mdao.mesh import dot_norm_rows as _norm, dot_unit_rows as _unit
+    from shellmesh_mdao.remesh.common import csr_entries as _expand, tri_min_angle as _tri_min_angle
 
     k = len(a)
     okd = okd.copy()
@@ -852,8 +854,8 @@ def _wavy_grid(rng, jitter, nx=14):
 def _grid_topology(F, n):
     """The remesh's edge table of triangles ``F`` on ``n`` points, its vertex neighbours and the
     faces around each vertex (CSR pairs)."""
-    from shellmesh_mdao.remesh import _Topo
-    T = _Topo(F, n)
+    from shellmesh_mdao.remesh.common import EdgeTable
+    T = EdgeTable(F, n)
     return T, T.vertex_neighbors(), T.vertex_faces(F)
 
 
@@ -865,7 +867,8 @@ def test_collapse_select_matches_the_numpy_formulas(seed):
     winner, the smaller longest-new-edge ratio first. On a wavy, jittered grid with a NaN size,
     a node on top of its neighbour and faces standing across the input."""
     from shellmesh_mdao.kernels import collapse_select, greedy_independent_rings
-    from shellmesh_mdao.remesh import _tri_normals, _unit
+    from shellmesh_mdao.mesh import dot_unit_rows as _unit
+    from shellmesh_mdao.remesh.common import tri_normals as _tri_normals
 
     rng = np.random.default_rng(seed)
     P, F, idx = _wavy_grid(rng, 0.3)
@@ -925,7 +928,8 @@ def test_collapse_select_facing_only_matches_the_numpy_formulas(seed):
     from shellmesh_mdao.kernels import collapse_select, facing_ok, greedy_independent_rings
     from shellmesh_mdao.mesh import cross_rows
     from shellmesh_mdao.project import SurfaceLocator
-    from shellmesh_mdao.remesh import _expand, _norm, _tri_normals, _unit
+    from shellmesh_mdao.mesh import dot_norm_rows as _norm, dot_unit_rows as _unit
+    from shellmesh_mdao.remesh.common import csr_entries as _expand, tri_normals as _tri_normals
 
     rng = np.random.default_rng(seed)
     P, F, idx = _wavy_grid(rng, 0.35)
@@ -993,7 +997,8 @@ def test_flip_candidates_match_the_numpy_formulas(seed):
     tetrahedron beside it (whose flips would create existing edges), a node on top of its
     neighbour, feature edges, two patches and faces standing across."""
     from shellmesh_mdao.kernels import flip_candidates
-    from shellmesh_mdao.remesh import _min_angle_of, _Topo, _unit
+    from shellmesh_mdao.mesh import dot_unit_rows as _unit
+    from shellmesh_mdao.remesh.common import EdgeTable, min_angle_of as _min_angle_of
 
     rng = np.random.default_rng(seed)
     P, F, idx = _wavy_grid(rng, 0.3)
@@ -1002,7 +1007,7 @@ def test_flip_candidates_match_the_numpy_formulas(seed):
     F = np.vstack([F, t0 + np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])])
     P[idx[5, 5]] = P[idx[5, 6]]
     n, m = len(P), len(F)
-    T = _Topo(F, n)
+    T = EdgeTable(F, n)
     E = T.E
     isf = rng.random(len(E)) < 0.1
     fpatch = (rng.random(m) < 0.1).astype(np.int64)
@@ -1176,7 +1181,9 @@ def test_move_tests_match_the_numpy_formulas(seed):
     numpy formulas it replaced, on a wavy grid whose vertices move by up to two cells, one onto
     its neighbour, with NaN input normals and faces of the input turned over."""
     from shellmesh_mdao.kernels import move_tests
-    from shellmesh_mdao.remesh import _min_angle_of, _norm, _tri_min_angle, _tri_normals, _unit
+    from shellmesh_mdao.mesh import dot_norm_rows as _norm, dot_unit_rows as _unit
+    from shellmesh_mdao.remesh.common import min_angle_of as _min_angle_of, tri_min_angle as _tri_min_angle
+    from shellmesh_mdao.remesh.common import tri_normals as _tri_normals
 
     rng = np.random.default_rng(seed)
     P, F, idx = _wavy_grid(rng, 0.3)
@@ -1222,7 +1229,7 @@ def test_move_tests_match_the_numpy_formulas(seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_edge_table_matches_the_sorted_key_runs(seed):
-    """kernels.edge_table gives remesh._Topo's arrays of the whole-array construction: a stable
+    """kernels.edge_table gives remesh.common.EdgeTable's arrays of the whole-array construction: a stable
     sort of the half-edge keys and its runs (boundary, interior and, allowed, non-manifold edges)."""
     from shellmesh_mdao.kernels import edge_table
 
@@ -1344,7 +1351,7 @@ def test_index_checks_match_numpys_min_and_max():
 
 
 def _collapse_directions_numpy(E, cand, h0all, h1all, valence, F, nptr, nbr, kind, isf, chain_ok, remove_first):
-    """remesh._collapse_edges' numpy cheap tests before kernels.collapse_directions."""
+    """remesh.operations.collapse_edges' numpy cheap tests before kernels.collapse_directions."""
     from shellmesh_mdao.kernels import common_neighbour_counts
     n = len(nptr) - 1
     deg = np.diff(nptr)

@@ -180,9 +180,10 @@ def test_split_across_a_narrow_ridge_lands_on_its_crest():
     edge's own end, so a split there would not split. ``_across_ridge`` takes the surface
     point on the line through the midpoint across the edge instead: the crest, for a folded
     pair (normals cancelling) as for an ordinary one; other edges keep their closest point."""
-    from shellmesh_mdao.remesh import _across_ridge, _Ctx
+    from shellmesh_mdao.remesh.operations import _across_ridge
+    from shellmesh_mdao.remesh.work import Context
     P, F = _fin_strip()
-    ctx = _Ctx(locator=SurfaceLocator(P, F))
+    ctx = Context(locator=SurfaceLocator(P, F))
     pa = np.array([[0.0, 0.25, 0.0], [0.0, 0.25, 0.0], [0.5, 0.25, 0.0]])
     pb = np.array([[0.0, -0.25, 0.0], [0.0, -0.25, 0.0], [0.5, 0.25, 0.3]])
     mid = 0.5 * (pa + pb)
@@ -391,7 +392,7 @@ def test_collapse_apply_gives_the_numpy_update(seed):
     from scipy.spatial import Delaunay
 
     from shellmesh_mdao.kernels import collapse_apply, edge_neighbours, edge_table
-    from shellmesh_mdao.remesh import _Work
+    from shellmesh_mdao.remesh.work import WorkMesh
     rng = np.random.default_rng(60 + seed)
     n = int(rng.integers(30, 300))
     F = Delaunay(rng.random((n, 2))).simplices.astype(np.int64)
@@ -419,7 +420,7 @@ def test_collapse_apply_gives_the_numpy_update(seed):
     ch = rng.integers(-1, 4, len(fe))
 
     def work():
-        return _Work(rng.random((n, 3)), F.copy(), rng.integers(0, 3, len(F)), np.zeros(n, np.int64), np.zeros(n),
+        return WorkMesh(rng.random((n, 3)), F.copy(), rng.integers(0, 3, len(F)), np.zeros(n, np.int64), np.zeros(n),
                      np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), fe, ch, np.ones(n))
     W = work()
     remap = np.arange(n)
@@ -431,7 +432,7 @@ def test_collapse_apply_gives_the_numpy_update(seed):
     W.set_features(remap[fe], ch)
     keepv = np.ones(n, bool)
     keepv[a] = False
-    o2n = np.cumsum(keepv) - 1                          # _Work.subset_vertices before the kernel
+    o2n = np.cumsum(keepv) - 1                          # WorkMesh.subset_vertices before the kernel
     W.F = o2n[W.F]
     ok = keepv[W.fe[:, 0]] & keepv[W.fe[:, 1]]
     W.set_features(o2n[W.fe[ok]], W.fe_chain[ok])
@@ -451,7 +452,7 @@ def test_midpoint_distances_reuse_only_unchanged_midpoints():
     """The remesh's last steps remember edge-midpoint distances by the midpoint's coordinates:
     after some vertices move and edges change, the answers are the same bits as asking the
     locator for every edge, and only the new midpoints are asked for."""
-    from shellmesh_mdao.remesh import _MidpointDistances
+    from shellmesh_mdao.remesh.driver import _MidpointDistances
 
     rng = np.random.default_rng(3)
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 40, endpoint=False), np.linspace(0.2, np.pi - 0.2, 20))
