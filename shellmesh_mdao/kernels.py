@@ -25,6 +25,7 @@ the numpy code it replaces (the tests compare the two; the exceptions are docume
 :func:`closest_on_triangles` and :func:`collapse_select`). The compiled loops do not check bounds, so the Python
 wrappers check every index before handing it over.
 """
+
 from __future__ import annotations
 
 import math
@@ -33,6 +34,10 @@ import numpy as np
 from numba import njit
 
 from .core.threads import Background as _Background
+from .core.kernels import (in_range, check_index, greedy_independent, chain_walk, stable_order, vertex_faces,
+                           stable_pair_order, edge_table, edge_id, edge_rows, edge_lookup, dot3, clip01, sq_dist,
+                           dot3e, faces_at, cross3, norm3, cross_rows, norm_rows, dot_rows, dot_norm_rows,
+                           dot_unit_rows)  # noqa: F401
 
 __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_counts", "ortho_jacobian",
            "ortho_gradient", "ReducedHessian", "chain_walk", "arc_links", "arc_order", "centroid_d2", "corner_sums",
@@ -43,253 +48,6 @@ __all__ = ["greedy_independent", "greedy_independent_rings", "common_neighbour_c
            "element_normals", "faces_at", "edge_lengths", "corner_sin_cos", "corner_cosines", "facing_ok",
            "collapse_directions", "collapse_apply", "collapse_select", "flip_candidates", "skin_flips", "star_moves",
            "move_tests", "safe_matching_rounds", "warm_up"]
-
-
-# ============================================================================ independent sets
-@njit(cache=True, nogil=True)
-def _build(owner, res, alive, rank, ncand, nres):
-    """CSR of the entries of the live candidates: per candidate its resources (``cptr``,
-    ``cres``), per resource its candidates by falling rank (``rptr``, ``rcand``)."""
-    ccnt = np.zeros(ncand + 1, np.int64)
-    for e in range(owner.shape[0]):
-        if alive[owner[e]]:
-            ccnt[owner[e] + 1] += 1
-    cptr = np.cumsum(ccnt)
-    cres = np.empty(cptr[ncand], np.int64)
-    cfill = cptr[:ncand].copy()
-    for e in range(owner.shape[0]):
-        c = owner[e]
-        if alive[c]:
-            cres[cfill[c]] = res[e]
-            cfill[c] += 1
-    rptr, rcand = _by_resource(cptr, cres, rank, ncand, nres)
-    return cptr, cres, rptr, rcand
-
-
-@njit(cache=True, nogil=True)
-def _build_rings(nptr, nbr, u, v, alive, rank, ncand, nres):
-    """:func:`_build` for candidates whose resources are the neighbour lists of two
-    vertices ``u[c]`` and ``v[c]`` (CSR ``nptr``, ``nbr``), without listing the entries first."""
-    cptr = np.zeros(ncand + 1, np.int64)
-    for c in range(ncand):
-        k = 0
-        if alive[c]:
-            k = nptr[u[c] + 1] - nptr[u[c]] + nptr[v[c] + 1] - nptr[v[c]]
-        cptr[c + 1] = cptr[c] + k
-    cres = np.empty(cptr[ncand], np.int64)
-    for c in range(ncand):
-        if alive[c]:
-            k = cptr[c]
-            for p in range(nptr[u[c]], nptr[u[c] + 1]):
-                cres[k] = nbr[p]
-                k += 1
-            for p in range(nptr[v[c]], nptr[v[c] + 1]):
-                cres[k] = nbr[p]
-                k += 1
-    rptr, rcand = _by_resource(cptr, cres, rank, ncand, nres)
-    return cptr, cres, rptr, rcand
-
-
-@njit(cache=True, nogil=True)
-def _by_resource(cptr, cres, rank, ncand, nres):
-    """Per resource its candidates by falling rank (``rank``: 1..ncand), filled candidate by
-    candidate from the highest rank down, so no list needs sorting."""
-    rcnt = np.zeros(nres + 1, np.int64)
-    for k in range(cres.shape[0]):
-        rcnt[cres[k] + 1] += 1
-    rptr = np.cumsum(rcnt)
-    by_rank = np.empty(ncand, np.int64)
-    for c in range(ncand):
-        by_rank[ncand - rank[c]] = c
-    rcand = np.empty(rptr[nres], np.int64)
-    rfill = rptr[:nres].copy()
-    for i in range(ncand):
-        c = by_rank[i]
-        for k in range(cptr[c], cptr[c + 1]):
-            r = cres[k]
-            rcand[rfill[r]] = c
-            rfill[r] += 1
-    return rptr, rcand
-
-
-@njit(cache=True, nogil=True)
-def _top(r, rtop, rptr, rcand, resolved):
-    """Highest-ranked candidate of resource ``r`` still in play (-1: none)."""
-    p = rtop[r]
-    end = rptr[r + 1]
-    while p < end and resolved[rcand[p]]:
-        p += 1
-    rtop[r] = p
-    return rcand[p] if p < end else -1
-
-
-@njit(cache=True, nogil=True)
-def _wins(c, cptr, cres, rtop, rptr, rcand, resolved):
-    """True when ``c`` is the highest-ranked candidate in play on every one of its resources."""
-    for k in range(cptr[c], cptr[c + 1]):
-        if _top(cres[k], rtop, rptr, rcand, resolved) != c:
-            return False
-    return True
-
-
-@njit(cache=True, nogil=True)
-def _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand):
-    out = np.empty(ncand, np.int64)
-    k = 0
-    for c in range(ncand):
-        if not resolved[c] and _wins(c, cptr, cres, rtop, rptr, rcand, resolved):
-            out[k] = c
-            k += 1
-    return out[:k]
-
-
-@njit(cache=True, nogil=True)
-def _next_wave(win, acc, cptr, cres, rtop, rptr, rcand, resolved, seen, wave):
-    """Resolve the winners ``win`` (``acc``: taken, else dropped), drop every candidate in
-    play on a resource of a taken winner, and return the next sub-round's winners (sorted):
-    only a new top of a resource of a resolved candidate can be one."""
-    ncand = resolved.shape[0]
-    new = np.empty(ncand, np.int64)
-    nn = 0
-    for i in range(win.shape[0]):
-        resolved[win[i]] = True
-        new[nn] = win[i]
-        nn += 1
-    for i in range(win.shape[0]):
-        if acc[i]:
-            c = win[i]
-            for k in range(cptr[c], cptr[c + 1]):
-                r = cres[k]
-                for p in range(rtop[r], rptr[r + 1]):
-                    d = rcand[p]
-                    if not resolved[d]:
-                        resolved[d] = True
-                        new[nn] = d
-                        nn += 1
-    out = np.empty(ncand, np.int64)
-    no = 0
-    for i in range(nn):
-        d = new[i]
-        for k in range(cptr[d], cptr[d + 1]):
-            t = _top(cres[k], rtop, rptr, rcand, resolved)
-            if t >= 0 and seen[t] != wave:
-                seen[t] = wave
-                if _wins(t, cptr, cres, rtop, rptr, rcand, resolved):
-                    out[no] = t
-                    no += 1
-    return np.sort(out[:no])
-
-
-def _dense_rank(rank):
-    """``rank`` as int64 1..n in the same order (unique ranks required)."""
-    rank = np.ascontiguousarray(rank, dtype=np.int64)
-    n = len(rank)
-    if n and (rank.min() != 1 or rank.max() != n or not np.bincount(rank, minlength=n + 1)[1:].all()):
-        if len(np.unique(rank)) != n:
-            raise ValueError("greedy_independent needs a unique rank per candidate")
-        dense = np.empty(n, np.int64)
-        dense[np.argsort(rank, kind="stable")] = np.arange(1, n + 1)
-        rank = dense
-    return rank
-
-
-def _waves(cptr, cres, rptr, rcand, alive, check, max_sub):
-    """The sub-rounds: the first wave from a scan of all candidates, each next one from the
-    resources the last one resolved; ``check`` sees each wave's winners in increasing order."""
-    ncand = len(alive)
-    sel = np.zeros(ncand, bool)
-    rtop = rptr[:-1].copy()
-    resolved = ~alive
-    seen = np.full(ncand, -1, np.int64)
-    win = _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand)
-    for wave in range(max_sub):
-        if not len(win):
-            break
-        good = np.ones(len(win), bool) if check is None else np.asarray(check(win), dtype=np.bool_)
-        sel[win[good]] = True
-        if wave + 1 == max_sub:
-            break
-        win = _next_wave(win, good, cptr, cres, rtop, rptr, rcand, resolved, seen, wave)
-    return sel
-
-
-@njit(cache=True, nogil=True)
-def _in_range(a, n):
-    """Whether every entry of the non-empty int64 vector ``a`` is in [0, n): its least and
-    largest entry in one pass (a loop without branches, which the compiler vectorises: 5 us
-    for 60k entries, against 12 us for numpy's min and max)."""
-    mn = a[0]
-    mx = a[0]
-    for i in range(a.shape[0]):
-        x = a[i]
-        mn = min(mn, x)
-        mx = max(mx, x)
-    return mn >= 0 and mx < n
-
-
-def _check_index(name, a, n):
-    if not len(a):
-        return
-    ok = (_in_range(a.reshape(-1), n) if a.dtype == np.int64 and a.flags.c_contiguous
-          else not (a.min() < 0 or a.max() >= n))
-    if not ok:
-        raise ValueError(f"{name} holds indices outside [0, {n}): {int(a.min())}..{int(a.max())}")
-
-
-def _check_csr(nptr, nbr):
-    n = len(nptr) - 1
-    if n < 0 or (n and (nptr[0] != 0 or nptr[-1] != len(nbr) or (np.diff(nptr) < 0).any())):
-        raise ValueError("nptr must be CSR row pointers into nbr: start at 0, never decrease, end at len(nbr)")
-    _check_index("nbr", nbr, n)
-
-
-def _select(build, rank, alive, check, max_sub):
-    """Dense ranks, live mask, ``build(alive, rank, ncand)`` -> the CSR tables, then the waves."""
-    rank = _dense_rank(rank)
-    ncand = len(rank)
-    if not ncand:
-        return np.zeros(0, bool)
-    alive = np.ones(ncand, bool) if alive is None else np.ascontiguousarray(alive, dtype=np.bool_)
-    cptr, cres, rptr, rcand = build(alive, rank, ncand)
-    return _waves(cptr, cres, rptr, rcand, alive, check, max_sub)
-
-
-def greedy_independent(owner, res, rank, nres, *, alive=None, check=None, max_sub=12):
-    """Greedy maximal independent set of candidates over shared resources.
-
-    Candidate ``owner[i]`` uses resource ``res[i]`` (``0 <= res < nres``); ``rank`` is a unique
-    integer per candidate (higher first; 1..ncand is fastest); ``alive`` (bool per
-    candidate, default all) leaves the others out. Sub-round by sub-round (at most
-    ``max_sub``), every candidate in play that outranks every other candidate in play on
-    each of its resources wins; ``check(winners) -> bool array`` (default: all True) keeps
-    some of them. A kept winner takes its resources and every other candidate on them drops
-    out; a winner not kept just drops out. Returns the bool mask of the kept winners.
-
-    The same sets as running the sub-rounds on whole arrays (select the local maxima, drop
-    what touches a taken resource, repeat), but each entry is visited a bounded number of
-    times instead of once per sub-round."""
-    owner = np.ascontiguousarray(owner, dtype=np.int64)
-    res = np.ascontiguousarray(res, dtype=np.int64)
-    _check_index("owner", owner, len(rank))
-    _check_index("res", res, int(nres))
-    if len(owner) != len(res):
-        raise ValueError(f"owner and res need one entry each per use, got {len(owner)} and {len(res)}")
-    return _select(lambda alive, rank, ncand: _build(owner, res, alive, rank, ncand, int(nres)),
-                   rank, alive, check, max_sub)
-
-
-def greedy_independent_rings(nptr, nbr, u, v, rank, *, alive=None, check=None, max_sub=12):
-    """:func:`greedy_independent` where candidate ``c`` uses the vertices of the neighbour
-    lists of ``u[c]`` and ``v[c]`` (graph CSR ``nptr``, ``nbr``; for an edge ``(u, v)`` the
-    closed 1-rings of both ends), without listing those entries in memory first."""
-    nptr, nbr, u, v = (np.ascontiguousarray(x, dtype=np.int64) for x in (nptr, nbr, u, v))
-    _check_csr(nptr, nbr)
-    _check_index("u", u, len(nptr) - 1)
-    _check_index("v", v, len(nptr) - 1)
-    if not len(u) == len(v) == len(rank):
-        raise ValueError(f"u, v and rank need one entry per candidate, got {len(u)}, {len(v)} and {len(rank)}")
-    return _select(lambda alive, rank, ncand: _build_rings(nptr, nbr, u, v, alive, rank, ncand, len(nptr) - 1),
-                   rank, alive, check, max_sub)
 
 
 @njit(cache=True, nogil=True)
@@ -364,41 +122,11 @@ def safe_matching_rounds(f0, f1, w, n_faces, max_rounds: int = 100):
     k = len(w)
     if not len(f0) == len(f1) == k:
         raise ValueError(f"safe_matching_rounds: f0, f1 and w need one entry per edge, got {len(f0)}, {len(f1)}, {k}")
-    _check_index("f0", f0, int(n_faces))
-    _check_index("f1", f1, int(n_faces))
+    check_index("f0", f0, int(n_faces))
+    check_index("f1", f1, int(n_faces))
     rank = np.empty(k, dtype=np.int64)
     rank[np.lexsort((np.arange(k), w))] = np.arange(k)
     return _safe_rounds(f0, f1, -w, rank, int(n_faces), int(max_rounds))
-
-
-# ============================================================================ topology
-@njit(cache=True, nogil=True)
-def _common(nptr, nbr, u, v, n):
-    stamp = np.full(n, -1, np.int64)
-    out = np.zeros(u.shape[0], np.int64)
-    for i in range(u.shape[0]):
-        a = u[i]
-        for p in range(nptr[a], nptr[a + 1]):
-            stamp[nbr[p]] = i
-        b = v[i]
-        c = 0
-        for p in range(nptr[b], nptr[b + 1]):
-            if stamp[nbr[p]] == i:
-                c += 1
-        out[i] = c
-    return out
-
-
-def common_neighbour_counts(nptr, nbr, u, v):
-    """Number of common neighbours of ``u[i]`` and ``v[i]`` in the graph with CSR
-    neighbour lists ``(nptr, nbr)`` (lists without repeats)."""
-    nptr, nbr, u, v = (np.ascontiguousarray(x, dtype=np.int64) for x in (nptr, nbr, u, v))
-    _check_csr(nptr, nbr)
-    _check_index("u", u, len(nptr) - 1)
-    _check_index("v", v, len(nptr) - 1)
-    if len(u) != len(v):
-        raise ValueError(f"u and v need the same length, got {len(u)} and {len(v)}")
-    return _common(nptr, nbr, u, v, len(nptr) - 1)
 
 
 # ============================================================================ smoothing
@@ -488,7 +216,7 @@ def _corners(a, b, c, n, su, sv, w, nv):
     if len(b) != m or len(c) != m or len(n) != m or any(len(v) != m for v in f):
         raise ValueError("a, b, c, n, su, sv and w must have one entry per corner")
     for name, v in (("a", a), ("b", b), ("c", c)):
-        _check_index(name, v, nv)
+        check_index(name, v, nv)
     return a, b, c, n, f[0], f[1], f[2]
 
 
@@ -534,124 +262,6 @@ def ortho_gradient(a, b, c, n, su, sv, w, x, nv):
         raise ValueError(f"x must hold the nv = {nv} positions")
     a, b, c, n, su, sv, w = _corners(a, b, c, n, su, sv, w, nv)
     return _ortho_gradient(a, b, c, n, su, sv, w, x, nv)
-
-
-# ============================================================================ polylines
-@njit(cache=True, nogil=True)
-def _chain_walk(e, n):
-    k = e.shape[0]
-    deg = np.zeros(n, np.int64)
-    for i in range(k):
-        deg[e[i, 0]] += 1
-        deg[e[i, 1]] += 1
-    ptr = np.zeros(n + 1, np.int64)
-    for v in range(n):
-        ptr[v + 1] = ptr[v] + deg[v]
-    inc = np.empty(ptr[n], np.int64)
-    fill = ptr[:n].copy()
-    for i in range(k):                     # each node's edges by rising edge id
-        inc[fill[e[i, 0]]] = i
-        fill[e[i, 0]] += 1
-        inc[fill[e[i, 1]]] = i
-        fill[e[i, 1]] += 1
-    seen = np.zeros(k, np.bool_)
-    nodes = np.empty(2 * k + k, np.int64)
-    optr = np.zeros(k + 1, np.int64)
-    closed = np.zeros(k, np.bool_)
-    fwd = np.empty(k + 1, np.int64)
-    bwd = np.empty(k + 1, np.int64)
-    fe = np.empty(k + 1, np.int64)                  # a loop's nodes, before its rotation
-    nc = 0
-    m = 0
-    for i in range(k):
-        if seen[i]:
-            continue
-        # the chain of edge i: walk on through nodes of degree 2 from both of its ends
-        seen[i] = True
-        a, b = e[i, 0], e[i, 1]
-        nf = 0
-        fwd[0] = b
-        cur, pe = b, i
-        cyc = False
-        while deg[cur] == 2:
-            ne = inc[ptr[cur]] if inc[ptr[cur]] != pe else inc[ptr[cur] + 1]
-            if ne == i:
-                cyc = True
-                break
-            seen[ne] = True
-            cur = e[ne, 1] if e[ne, 0] == cur else e[ne, 0]
-            pe = ne
-            nf += 1
-            fwd[nf] = cur
-        fe_last = pe                       # the edge that ends the forward walk
-        nb = 0
-        bwd[0] = a
-        be_last = i
-        if not cyc:
-            cur, pe = a, i
-            while deg[cur] == 2:
-                ne = inc[ptr[cur]] if inc[ptr[cur]] != pe else inc[ptr[cur] + 1]
-                seen[ne] = True
-                cur = e[ne, 1] if e[ne, 0] == cur else e[ne, 0]
-                pe = ne
-                nb += 1
-                bwd[nb] = cur
-            be_last = pe
-        # the sequence: bwd reversed, then fwd (a chain of len nb + nf + 2 nodes)
-        L = nb + 1 + nf + 1
-        s = m
-        for t in range(nb + 1):
-            nodes[s + t] = bwd[nb - t]
-        for t in range(nf + 1):
-            nodes[s + nb + 1 + t] = fwd[t]
-        if cyc:
-            # a loop: from its lowest node, first towards the lower of that node's two neighbours
-            L -= 1                         # the walk came back to its start: drop the repeat
-            lo = 0
-            for t in range(1, L):
-                if nodes[s + t] < nodes[s + lo]:
-                    lo = t
-            nx = nodes[s + (lo + 1) % L]
-            pv = nodes[s + (lo - 1 + L) % L]
-            for t in range(L):
-                fe[t] = nodes[s + t]
-            for t in range(L):
-                if nx < pv:
-                    nodes[s + t] = fe[(lo + t) % L]
-                else:
-                    nodes[s + t] = fe[(lo - t + L) % L]
-            closed[nc] = True
-        else:
-            # a path between two break nodes: from the lower one; from the end of the lower
-            # edge where both ends are one node
-            first, last = nodes[s], nodes[s + L - 1]
-            rev = last < first or (last == first and fe_last < be_last)
-            if rev:
-                for t in range(L // 2):
-                    x = nodes[s + t]
-                    nodes[s + t] = nodes[s + L - 1 - t]
-                    nodes[s + L - 1 - t] = x
-        m += L
-        nc += 1
-        optr[nc] = m
-    return nodes[:m], optr[:nc + 1], closed[:nc]
-
-
-def chain_walk(edges, n):
-    """The polylines of an edge graph: chains of edges broken at every node whose degree is
-    not 2, and loops. ``edges`` (k, 2): distinct sorted rows of node ids in [0, n), no
-    self-loops. Returns ``(nodes, ptr, closed)``: chain ``c`` is ``nodes[ptr[c]:ptr[c + 1]]``,
-    ``closed[c]`` for a loop (its first node not repeated). Chains come in the order of their
-    lowest edge; a path runs from its lower end node (from the end of its lower edge where
-    both ends are one node), a loop from its lowest node towards the lower of that node's two
-    neighbours (the walks of scipy's ``depth_first_order`` on the graph with the break nodes
-    split, which :func:`~shellmesh_mdao.smooth.polylines_from_edges` used)."""
-    e = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
-    n = int(n)
-    _check_index("edges", e.ravel(), n)
-    if len(e) and ((e[:, 0] >= e[:, 1]).any() or (len(e) > 1 and not (np.diff(e[:, 0] * n + e[:, 1]) > 0).all())):
-        raise ValueError("edges must be distinct rows (u, v) with u < v, sorted")
-    return _chain_walk(e, n)
 
 
 @njit(cache=True, nogil=True)
@@ -765,8 +375,8 @@ def arc_links(u, v, nn, best):
     u, v = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (u, v))
     if len(u) != len(v) or not (0 <= int(best) < len(u)):
         raise ValueError("arc_links needs as many u as v and best among them")
-    _check_index("u", u, int(nn))
-    _check_index("v", v, int(nn))
+    check_index("u", u, int(nn))
+    check_index("v", v, int(nn))
     return _link_component(u, v, int(nn), int(best))
 
 
@@ -780,9 +390,9 @@ def arc_order(lu, lv, nn, start):
     lu, lv = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (lu, lv))
     if len(lu) != len(lv):
         raise ValueError("arc_order needs as many lu as lv")
-    _check_index("lu", lu, int(nn))
-    _check_index("lv", lv, int(nn))
-    _check_index("start", np.array([int(start)]), int(nn))
+    check_index("lu", lu, int(nn))
+    check_index("lv", lv, int(nn))
+    check_index("start", np.array([int(start)]), int(nn))
     return _arc_order(lu, lv, int(nn), int(start))
 
 
@@ -1054,7 +664,7 @@ class ReducedHessian:
         if len(self.pu) != len(self.pv):
             raise ValueError("pu and pv must have one entry per pair")
         for name, v in (("pu", self.pu), ("pv", self.pv), ("quads", self.quads.ravel())):
-            _check_index(name, v, n)
+            check_index(name, v, n)
         if len(self.col_start) != n or (n and (self.ncol.min() < 0 or self.ncol.max() > 3)):
             raise ValueError("ncol must give 0 to 3 columns for each vertex of col_start")
         self.k = int(self.ncol.sum())
@@ -1097,7 +707,7 @@ class ReducedHessian:
             qi = np.asarray(warp[0], dtype=np.int64).reshape(-1)
             wm = np.ascontiguousarray(warp[1], dtype=np.float64).reshape(-1, 4, 3)
             wsw = np.ascontiguousarray(warp[2], dtype=np.float64).reshape(-1)
-            _check_index("warp quads", qi, nq)
+            check_index("warp quads", qi, nq)
             if len(wm) != len(qi) or len(wsw) != len(qi) or len(np.unique(qi)) != len(qi):
                 raise ValueError("the planarity term needs distinct quads, each with one m and one sw")
             wrow[qi] = np.arange(len(qi))
@@ -1258,587 +868,9 @@ def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
         raise ValueError("nref must have one normal per face")
     out = _min_corner_sj(P, faces, is_tri, nref, use_ref, float(tri_scale))
     if out is None:                    # an index out of range, found in the loop: say which
-        _check_index("faces", np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]]), len(P))
+        check_index("faces", np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]]), len(P))
         raise ValueError(f"faces holds indices outside [0, {len(P)})")
     return out
-
-
-# ============================================================================ sorting
-@njit(cache=True, nogil=True)
-def _counting_order(keys, n, idx):
-    """Stable order of ``keys[idx]`` (all in [0, n)) as positions into ``idx``."""
-    cnt = np.zeros(n + 1, np.int64)
-    for i in range(idx.shape[0]):
-        cnt[keys[idx[i]] + 1] += 1
-    for k in range(n):
-        cnt[k + 1] += cnt[k]
-    out = np.empty(idx.shape[0], np.int64)
-    for i in range(idx.shape[0]):
-        k = keys[idx[i]]
-        out[cnt[k]] = idx[i]
-        cnt[k] += 1
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _pair_order(lo, hi, n):
-    o = _counting_order(hi, n, np.arange(hi.shape[0]))
-    return _counting_order(lo, n, o)
-
-
-def stable_order(keys, n):
-    """``np.argsort(keys, kind="stable")`` for integer keys in [0, n), by a counting sort
-    (O(len + n); a stable order is unique, so the same array)."""
-    keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
-    _check_index("keys", keys, int(n))
-    return _counting_order(keys, int(n), np.arange(len(keys)))
-
-
-@njit(cache=True, nogil=True)
-def _group_order(keys, n):
-    ptr = np.zeros(n + 1, np.int64)
-    for i in range(keys.shape[0]):
-        ptr[keys[i] + 1] += 1
-    for k in range(n):
-        ptr[k + 1] += ptr[k]
-    return ptr, _counting_order(keys, n, np.arange(keys.shape[0]))
-
-
-def group_order(keys, n):
-    """Row pointers ``ptr`` (n + 1,) and ``order`` grouping ``arange(len(keys))`` by ``keys``
-    (integers in [0, n)): ``order`` is ``np.argsort(keys, kind="stable")`` and group ``k`` is
-    ``order[ptr[k]:ptr[k + 1]]``, in one counting pass."""
-    keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
-    _check_index("keys", keys, int(n))
-    return _group_order(keys, int(n))
-
-
-@njit(cache=True, nogil=True)
-def _vertex_faces(F, n):
-    ptr = np.zeros(n + 1, np.int64)
-    for f in range(F.shape[0]):
-        for k in range(F.shape[1]):
-            if F[f, k] >= n or F[f, k] < -1:
-                return None
-            if F[f, k] >= 0:
-                ptr[F[f, k] + 1] += 1
-    for v in range(n):
-        ptr[v + 1] += ptr[v]
-    fill = ptr[:n].copy()
-    out = np.empty(ptr[n], np.int64)
-    for f in range(F.shape[0]):
-        for k in range(F.shape[1]):
-            v = F[f, k]
-            if v >= 0:
-                out[fill[v]] = f
-                fill[v] += 1
-    return ptr, out
-
-
-def vertex_faces(F, n):
-    """CSR ``(ptr, faces)`` of the faces around each vertex of the face array ``F`` ((m, 3) or
-    (m, 4), -1 padded) on ``n`` vertices, each vertex's faces in ascending order (a face
-    listing a vertex twice, twice): the stable grouping of the face ids by vertex in one
-    counting pass."""
-    F = np.ascontiguousarray(F, dtype=np.int64)
-    if F.ndim != 2:
-        raise ValueError(f"vertex_faces: faces must be an (m, k) array, got shape {F.shape}")
-    out = _vertex_faces(F, int(n))
-    if out is None:                    # an entry out of range, found in the loop: say which
-        _check_index("faces", F[F != -1], int(n))
-        raise ValueError(f"faces holds indices outside [0, {int(n)})")
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _edge_neighbours(E, n):
-    ne = E.shape[0]
-    ptr = np.zeros(n + 1, np.int64)
-    for i in range(ne):
-        ptr[E[i, 0] + 1] += 1
-        ptr[E[i, 1] + 1] += 1
-    for k in range(n):
-        ptr[k + 1] += ptr[k]
-    fill = ptr[:n].copy()
-    nbr = np.empty(2 * ne, np.int64)
-    for i in range(ne):                     # first each vertex's edges as their first end ...
-        a = E[i, 0]
-        nbr[fill[a]] = E[i, 1]
-        fill[a] += 1
-    for i in range(ne):                     # ... then as their second, each in edge order
-        b = E[i, 1]
-        nbr[fill[b]] = E[i, 0]
-        fill[b] += 1
-    return ptr, nbr
-
-
-def edge_neighbours(E, n):
-    """CSR ``(ptr, nbr)`` of the vertices next to each vertex along the edges ``E`` (e, 2) on
-    ``n`` vertices: for vertex v, the other ends of the edges whose first end is v (in edge
-    order), then of those whose second end is v (the grouping of
-    ``concatenate([E[:, 1], E[:, 0]])`` by ``concatenate([E[:, 0], E[:, 1]])``, stable)."""
-    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
-    _check_index("E", E, int(n))
-    return _edge_neighbours(E, int(n))
-
-
-def stable_pair_order(lo, hi, n):
-    """``np.argsort(lo * n + hi, kind="stable")`` for integer ``lo``, ``hi`` in [0, n): two
-    counting sorts (by ``hi``, then stably by ``lo``), the same array without the products."""
-    lo = np.ascontiguousarray(lo, dtype=np.int64).reshape(-1)
-    hi = np.ascontiguousarray(hi, dtype=np.int64).reshape(-1)
-    if len(lo) != len(hi):
-        raise ValueError("lo and hi must have the same length")
-    _check_index("lo", lo, int(n))
-    _check_index("hi", hi, int(n))
-    return _pair_order(lo, hi, int(n))
-
-
-@njit(cache=True, nogil=True)
-def _radix_pass(key, shift, src, dst, cnt):
-    """One stable counting pass of an LSD radix sort: ``src`` (positions) into ``dst`` by the
-    11-bit digit of ``key`` at ``shift``; False (``dst`` untouched) when every position has
-    the same digit, as the pass would not change the order."""
-    cnt[:] = 0
-    for i in range(src.shape[0]):
-        cnt[((key[src[i]] >> shift) & 2047) + 1] += 1
-    if cnt[((key[src[0]] >> shift) & 2047) + 1] == src.shape[0]:
-        return False
-    for d in range(2048):
-        cnt[d + 1] += cnt[d]
-    for i in range(src.shape[0]):
-        d = (key[src[i]] >> shift) & 2047
-        dst[cnt[d]] = src[i]
-        cnt[d] += 1
-    return True
-
-
-@njit(cache=True, nogil=True)
-def _rank_desc(prio, tie):
-    n = prio.shape[0]
-    # the float's bits made to order like the number: -prio ascending, i.e. prio descending
-    # (-0.0 counted as 0.0, as a comparison does)
-    kf = np.empty(n, np.uint64)
-    for i in range(n):
-        b = np.float64(-prio[i] + 0.0).view(np.uint64)
-        kf[i] = ~b if b >> np.uint64(63) else b | (np.uint64(1) << np.uint64(63))
-    a = np.arange(n)
-    b = np.empty(n, np.int64)
-    cnt = np.zeros(2049, np.int64)
-    if n:
-        top = np.uint64(0)
-        for i in range(n):
-            top = max(top, tie[i])
-        for shift in range(0, 64, 11):                    # tie first: the passes are stable
-            if (top >> np.uint64(shift)) and _radix_pass(tie, np.uint64(shift), a, b, cnt):
-                a, b = b, a
-        for shift in range(0, 64, 11):
-            if _radix_pass(kf, np.uint64(shift), a, b, cnt):
-                a, b = b, a
-    r = np.empty(n, np.int64)
-    for j in range(n):
-        r[a[j]] = n - j
-    return r
-
-
-def rank_desc(prio, tie):
-    """Unique rank of each entry, ``len(prio)`` for the first: larger ``prio`` (float64, no
-    NaN) first, equal ones by smaller ``tie`` (uint64, unique among them). The ranks of
-    ``np.lexsort((tie, -prio))`` (a radix sort of the two keys' bits: 20k entries in about
-    0.3 ms against 2.7 ms); NaNs are refused."""
-    prio = np.ascontiguousarray(prio, dtype=np.float64).reshape(-1)
-    tie = np.ascontiguousarray(tie, dtype=np.uint64).reshape(-1)
-    if len(prio) != len(tie):
-        raise ValueError(f"rank_desc: prio and tie need the same length, got {len(prio)} and {len(tie)}")
-    if np.isnan(prio).any():
-        raise ValueError("rank_desc: NaN priorities have no rank")
-    return _rank_desc(prio, tie)
-
-
-@njit(cache=True, nogil=True)
-def _edge_table(F, n):
-    m = F.shape[0]
-    lo = np.empty(3 * m, np.int64)
-    hi = np.empty(3 * m, np.int64)
-    for f in range(m):
-        for k in range(3):
-            a, b = F[f, k], F[f, (k + 1) % 3]
-            lo[3 * f + k] = a if a < b else b
-            hi[3 * f + k] = b if a < b else a
-    order = _pair_order(lo, hi, n)
-    nh = 3 * m
-    he_edge = np.empty(nh, np.int64)
-    ne = 0
-    for j in range(nh):
-        if j == 0 or lo[order[j]] != lo[order[j - 1]] or hi[order[j]] != hi[order[j - 1]]:
-            ne += 1
-        he_edge[order[j]] = ne - 1
-    h0 = np.empty(ne, np.int64)
-    h1 = np.full(ne, -1, np.int64)
-    cnt = np.zeros(ne, np.int64)
-    E = np.empty((ne, 2), np.int64)
-    keys = np.empty(ne, np.int64)
-    for j in range(nh):
-        h = order[j]
-        e = he_edge[h]
-        if cnt[e] == 0:
-            h0[e] = h
-            E[e, 0], E[e, 1] = lo[h], hi[h]
-            keys[e] = lo[h] * n + hi[h]
-        elif cnt[e] == 1:
-            h1[e] = h
-        cnt[e] += 1
-    for e in range(ne):
-        if cnt[e] != 2:
-            h1[e] = -1
-    return he_edge, h0, h1, cnt, E, keys
-
-
-def edge_table(F, n):
-    """Edge table of triangles ``F`` (m, 3) on ``n`` vertices, edges in the order of their keys
-    ``lo * n + hi``: ``(he_edge (3m,), h0, h1, valence, E (e, 2), keys)``, half-edge ``3 f + k``
-    running from ``F[f, k]`` to ``F[f, k + 1]``; ``h0`` the first half-edge of each edge (in
-    half-edge order), ``h1`` the second where the edge has exactly two, else -1. The arrays of
-    ``remesh._Topo``'s whole-array construction (stable sort of the keys, run starts)."""
-    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
-    _check_index("F", F, int(n))
-    return _edge_table(F, int(n))
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _edge_id(E, kptr, u, v):
-    """Row of the edge (u, v) (either order) in the sorted edge table ``E``, -1 if absent: a
-    scan of the rows of the lower end (``kptr``)."""
-    lo, hi = (u, v) if u <= v else (v, u)
-    for e in range(kptr[lo], kptr[lo + 1]):
-        if E[e, 1] == hi:
-            return e
-    return -1
-
-
-@njit(cache=True, nogil=True)
-def _edge_lookup(E, kptr, u, v):
-    out = np.empty(u.shape[0], np.int64)
-    for i in range(u.shape[0]):
-        out[i] = _edge_id(E, kptr, u[i], v[i])
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _edge_rows(E, n):
-    ptr = np.zeros(n + 1, np.int64)
-    for e in range(E.shape[0]):
-        if not 0 <= E[e, 0] < n:
-            return None
-        ptr[E[e, 0] + 1] += 1
-    for k in range(n):
-        ptr[k + 1] += ptr[k]
-    return ptr
-
-
-def edge_rows(E, n):
-    """Row pointers ``kptr`` (n + 1,) of the edge table ``E`` (e, 2) of :func:`edge_table` (rows
-    ``(lo, hi)`` sorted): the rows whose lower end is ``lo`` are ``E[kptr[lo]:kptr[lo + 1]]``
-    (the counts of the lower ends, summed, in one compiled pass)."""
-    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
-    out = _edge_rows(E, int(n))
-    if out is None:                    # a lower end out of range, found in the loop: say which
-        _check_index("E", E[:, 0], int(n))
-        raise ValueError(f"E holds indices outside [0, {int(n)})")
-    return out
-
-
-def edge_lookup(E, kptr, u, v):
-    """Edge id of each node pair ``(u[i], v[i])`` (either order), -1 where absent, in the edge
-    table ``E`` (e, 2) of :func:`edge_table` (rows ``(lo, hi)`` sorted): ``kptr`` (n + 1,) the
-    rows of each ``lo`` (:func:`edge_rows`); a scan of those few rows."""
-    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
-    kptr = np.ascontiguousarray(kptr, dtype=np.int64)
-    u = np.ascontiguousarray(u, dtype=np.int64).reshape(-1)
-    v = np.ascontiguousarray(v, dtype=np.int64).reshape(-1)
-    if len(u) != len(v):
-        raise ValueError("edge_lookup needs as many u as v")
-    _check_index("u", u, len(kptr) - 1)
-    _check_index("v", v, len(kptr) - 1)
-    return _edge_lookup(E, kptr, u, v)
-
-
-# ============================================================================ triangles
-@njit(cache=True, nogil=True, inline="always")
-def _dot3(x0, x1, x2, y0, y1, y2):
-    return (x0 * y0 + x2 * y2) + x1 * y1             # numpy's einsum("ij,ij->i") over three
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _clip01(t):
-    """np.clip(t, 0, 1): (t > 0 ? t : 0) < 1 ? .. : 1; a NaN stays."""
-    if t == t:
-        t = t if t > 0.0 else 0.0
-        t = t if t < 1.0 else 1.0
-    return t
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _on_segment(p0, p1, p2, s0, s1, s2, e0, e1, e2):
-    """Closest point of the segment s-e to ``p``: ``s + clip(t, 0, 1) (e - s)``, t = 0 on a
-    zero-length segment."""
-    d0, d1, d2 = e0 - s0, e1 - s1, e2 - s2
-    L2 = _dot3(d0, d1, d2, d0, d1, d2)
-    t = 0.0
-    if L2 > 0:
-        t = _dot3(p0 - s0, p1 - s1, p2 - s2, d0, d1, d2) / L2
-    t = _clip01(t)
-    return s0 + t * d0, s1 + t * d1, s2 + t * d2
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _sq_dist(x0, x1, x2, p0, p1, p2):
-    """|x - p|^2 summed as numpy's row norm sums it (``mesh.norm_rows`` is its square root)."""
-    e0, e1, e2 = x0 - p0, x1 - p1, x2 - p2
-    return (e0 * e0 + e1 * e1) + e2 * e2
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _closest_on_triangle(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2):
-    """Closest point of triangle (a, b, c) to p: Ericson's regions (the vertices, the edges
-    ab, ac, bc, the interior); a zero-area triangle goes to the nearest of its edges."""
-    ab0, ab1, ab2 = b0 - a0, b1 - a1, b2 - a2
-    ac0, ac1, ac2 = c0 - a0, c1 - a1, c2 - a2
-    ap0, ap1, ap2 = p0 - a0, p1 - a1, p2 - a2
-    d1 = _dot3(ab0, ab1, ab2, ap0, ap1, ap2)
-    d2 = _dot3(ac0, ac1, ac2, ap0, ap1, ap2)
-    bp0, bp1, bp2 = p0 - b0, p1 - b1, p2 - b2
-    d3 = _dot3(ab0, ab1, ab2, bp0, bp1, bp2)
-    d4 = _dot3(ac0, ac1, ac2, bp0, bp1, bp2)
-    cp0, cp1, cp2 = p0 - c0, p1 - c1, p2 - c2
-    d5 = _dot3(ab0, ab1, ab2, cp0, cp1, cp2)
-    d6 = _dot3(ac0, ac1, ac2, cp0, cp1, cp2)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-    if d1 <= 0 and d2 <= 0:                                   # vertex a
-        return a0, a1, a2
-    if d3 >= 0 and d4 <= d3:                                  # vertex b
-        return b0, b1, b2
-    if d6 >= 0 and d5 <= d6:                                  # vertex c
-        return c0, c1, c2
-    # an edge of zero length (a repeated corner: its denominator is |e|^2 = 0) is no region
-    # of its own; the numpy version returned 0 / 0 = NaN there, the next region answers here
-    if vc <= 0 and d1 >= 0 and d3 <= 0 and d1 - d3 != 0:     # edge ab
-        v = d1 / (d1 - d3)
-        return a0 + v * ab0, a1 + v * ab1, a2 + v * ab2
-    if vb <= 0 and d2 >= 0 and d6 <= 0 and d2 - d6 != 0:     # edge ac
-        w = d2 / (d2 - d6)
-        return a0 + w * ac0, a1 + w * ac1, a2 + w * ac2
-    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0 and (d4 - d3) + (d5 - d6) != 0:   # edge bc
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        return b0 + w * (c0 - b0), b1 + w * (c1 - b1), b2 + w * (c2 - b2)
-    den = va + vb + vc
-    vv = vb / den
-    ww = vc / den
-    x0 = (a0 + vv * ab0) + ww * ac0
-    x1 = (a1 + vv * ab1) + ww * ac1
-    x2 = (a2 + vv * ab2) + ww * ac2
-    if np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2):
-        return x0, x1, x2
-    # a zero-area triangle: the nearest of its three edges (the first on a tie; a NaN
-    # distance wins, as np.argmin picks the first NaN)
-    qa0, qa1, qa2 = _on_segment(p0, p1, p2, a0, a1, a2, b0, b1, b2)
-    qb0, qb1, qb2 = _on_segment(p0, p1, p2, b0, b1, b2, c0, c1, c2)
-    qc0, qc1, qc2 = _on_segment(p0, p1, p2, c0, c1, c2, a0, a1, a2)
-    da = _dot3(qa0 - p0, qa1 - p1, qa2 - p2, qa0 - p0, qa1 - p1, qa2 - p2)
-    if da != da:
-        return qa0, qa1, qa2
-    db = _dot3(qb0 - p0, qb1 - p1, qb2 - p2, qb0 - p0, qb1 - p1, qb2 - p2)
-    if db != db:
-        return qb0, qb1, qb2
-    dc = _dot3(qc0 - p0, qc1 - p1, qc2 - p2, qc0 - p0, qc1 - p1, qc2 - p2)
-    if dc != dc:
-        return qc0, qc1, qc2
-    if db < da:
-        if dc < db:
-            return qc0, qc1, qc2
-        return qb0, qb1, qb2
-    if dc < da:
-        return qc0, qc1, qc2
-    return qa0, qa1, qa2
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _closest_on_triangles(P, A, B, C):
-    k = P.shape[0]
-    out = np.empty((k, 3))
-    for i in range(k):
-        p, a, b, c = P[i], A[i], B[i], C[i]
-        out[i, 0], out[i, 1], out[i, 2] = _closest_on_triangle(p[0], p[1], p[2], a[0], a[1], a[2], b[0], b[1],
-                                                               b[2], c[0], c[1], c[2])
-    return out
-
-
-def closest_on_triangles(p, a, b, c):
-    """Closest point of triangle ``(a[i], b[i], c[i])`` to ``p[i]`` (all (k, 3)): the same bits
-    as the numpy version of :func:`shellmesh_mdao.project.closest_point_on_triangles` (Ericson's
-    regions in the same order, numpy's sums of three products, the degenerate fallback onto
-    the nearest edge), one pass per point, except where that version returned NaN: an edge of
-    zero length is skipped as a region, so a triangle with a repeated corner gets the closest
-    point of its other edges."""
-    p, a, b, c = (np.ascontiguousarray(x, dtype=np.float64) for x in np.broadcast_arrays(
-        *(np.asarray(x, dtype=np.float64) for x in (p, a, b, c))))
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError("closest_on_triangles takes (k, 3) arrays")
-    return _closest_on_triangles(p, a, b, c)
-
-
-# ============================================================================ closest points on a surface
-@njit(cache=True, nogil=True)
-def _bvh_build(tlo, thi, leaf):
-    """Bounding-volume hierarchy over triangles with boxes ``tlo``/``thi`` (t, 3): a node
-    holding more than ``leaf`` triangles is split at the median of their box centres along
-    the longest extent of those centres (a stable sort: ties keep their order). Returns the
-    triangle order ``perm``, the node boxes (m, 6) (lo, hi), the first child of each node
-    (-1 for a leaf; the second is the next node) and each node's range of ``perm``."""
-    nt = tlo.shape[0]
-    perm = np.arange(nt)
-    maxn = 2 * nt + 1
-    box = np.empty((maxn, 6))
-    child = np.full(maxn, -1, np.int64)
-    start = np.zeros(maxn, np.int64)
-    cnt = np.zeros(maxn, np.int64)
-    visit = np.empty(maxn, np.int64)
-    stack = np.empty(256, np.int64)
-    key = np.empty(nt)
-    tmp = np.empty(nt, np.int64)
-    cnt[0] = nt
-    m, sp, nv = 1, 1, 0
-    stack[0] = 0
-    while sp:
-        sp -= 1
-        nd = stack[sp]
-        visit[nv] = nd
-        nv += 1
-        s, c = start[nd], cnt[nd]
-        if c <= leaf:
-            continue
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        for j in range(s, s + c):
-            t = perm[j]
-            for k in range(3):
-                x = 0.5 * (tlo[t, k] + thi[t, k])
-                lo[k] = min(lo[k], x)
-                hi[k] = max(hi[k], x)
-        ax = 0
-        for k in (1, 2):
-            if hi[k] - lo[k] > hi[ax] - lo[ax]:
-                ax = k
-        for j in range(c):
-            t = perm[s + j]
-            key[j] = 0.5 * (tlo[t, ax] + thi[t, ax])
-        o = np.argsort(key[:c], kind="mergesort")
-        for j in range(c):
-            tmp[j] = perm[s + o[j]]
-        perm[s:s + c] = tmp[:c]
-        half = c // 2
-        child[nd] = m
-        start[m], cnt[m] = s, half
-        start[m + 1], cnt[m + 1] = s + half, c - half
-        stack[sp], stack[sp + 1] = m, m + 1
-        sp += 2
-        m += 2
-    for i in range(nv - 1, -1, -1):               # children before their parents
-        nd = visit[i]
-        c = child[nd]
-        for k in range(3):
-            if c < 0:
-                lo_k, hi_k = np.inf, -np.inf
-                for j in range(start[nd], start[nd] + cnt[nd]):
-                    lo_k = min(lo_k, tlo[perm[j], k])
-                    hi_k = max(hi_k, thi[perm[j], k])
-            else:
-                lo_k = min(box[c, k], box[c + 1, k])
-                hi_k = max(box[c, 3 + k], box[c + 1, 3 + k])
-            box[nd, k], box[nd, 3 + k] = lo_k, hi_k
-    return perm, box[:m].copy(), child[:m].copy(), start[:m].copy(), cnt[:m].copy()
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _box_sq_dist(p0, p1, p2, B, i):
-    e0 = B[i, 0] - p0 if p0 < B[i, 0] else (p0 - B[i, 3] if p0 > B[i, 3] else 0.0)
-    e1 = B[i, 1] - p1 if p1 < B[i, 1] else (p1 - B[i, 4] if p1 > B[i, 4] else 0.0)
-    e2 = B[i, 2] - p2 if p2 < B[i, 2] else (p2 - B[i, 5] if p2 > B[i, 5] else 0.0)
-    return (e0 * e0 + e1 * e1) + e2 * e2
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _box_centre_sq_dist(p0, p1, p2, B, i):
-    return _sq_dist(0.5 * (B[i, 0] + B[i, 3]), 0.5 * (B[i, 1] + B[i, 4]), 0.5 * (B[i, 2] + B[i, 5]), p0, p1, p2)
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _bvh_closest(Q, lo, hi, V, TB, tri_id, NB, child, start, cnt, slack, out, oid, seed):
-    """Rows ``lo .. hi - 1`` of ``out`` / ``oid``: the closest point of the triangles to Q[i]
-    and its triangle. Depth first, the nearer child first (by box distance, then by the
-    distance to the box centre); a box or a triangle's own box farther than the best
-    squared distance so far (times ``1 + 1e-12``, plus ``slack``) is skipped, so every
-    triangle that can tie with the answer is computed and the rule picks among them: the
-    least squared distance, then the lowest triangle id.
-
-    ``seed`` (empty, or one entry per row of Q): the leaf-order position of a triangle to
-    compute first (-1: none), e.g. the one a moved point was closest to before. It only sets
-    the first bound, which prunes more of the tree; the answer is the rule's all the same
-    (the answer's own distance never exceeds a bound, so it and every triangle that can tie
-    with it are still computed)."""
-    stack = np.empty(256, np.int64)
-    sd = np.empty(256)
-    none = np.iinfo(np.int64).max
-    seeded = seed.shape[0] > 0
-    for i in range(lo, hi):
-        p0, p1, p2 = Q[i, 0], Q[i, 1], Q[i, 2]
-        best, lim, bid = np.inf, np.inf, none
-        x0 = x1 = x2 = np.nan
-        if seeded and seed[i] >= 0:
-            t = seed[i]
-            x0, x1, x2 = _closest_on_triangle(p0, p1, p2, V[t, 0], V[t, 1], V[t, 2], V[t, 3], V[t, 4], V[t, 5],
-                                              V[t, 6], V[t, 7], V[t, 8])
-            best, bid = _sq_dist(x0, x1, x2, p0, p1, p2), tri_id[t]
-            lim = best * (1.0 + 1e-12) + slack
-        stack[0], sd[0], sp = 0, 0.0, 1
-        while sp:
-            sp -= 1
-            if sd[sp] > lim:
-                continue
-            nd = stack[sp]
-            c = child[nd]
-            if c < 0:
-                for t in range(start[nd], start[nd] + cnt[nd]):
-                    if _box_sq_dist(p0, p1, p2, TB, t) > lim:
-                        continue
-                    y0, y1, y2 = _closest_on_triangle(p0, p1, p2, V[t, 0], V[t, 1], V[t, 2], V[t, 3], V[t, 4],
-                                                      V[t, 5], V[t, 6], V[t, 7], V[t, 8])
-                    d = _sq_dist(y0, y1, y2, p0, p1, p2)
-                    if d < best or (d == best and tri_id[t] < bid):
-                        best, bid = d, tri_id[t]
-                        x0, x1, x2 = y0, y1, y2
-                        lim = best * (1.0 + 1e-12) + slack
-                continue
-            dl = _box_sq_dist(p0, p1, p2, NB, c)
-            dr = _box_sq_dist(p0, p1, p2, NB, c + 1)
-            left_first = dl < dr
-            if dl == dr:
-                left_first = _box_centre_sq_dist(p0, p1, p2, NB, c) <= _box_centre_sq_dist(p0, p1, p2, NB, c + 1)
-            # push the farther child first: the nearer one is taken next
-            if left_first:
-                if dr <= lim:
-                    stack[sp], sd[sp], sp = c + 1, dr, sp + 1
-                if dl <= lim:
-                    stack[sp], sd[sp], sp = c, dl, sp + 1
-            else:
-                if dl <= lim:
-                    stack[sp], sd[sp], sp = c, dl, sp + 1
-                if dr <= lim:
-                    stack[sp], sd[sp], sp = c + 1, dr, sp + 1
-        out[i, 0], out[i, 1], out[i, 2] = x0, x1, x2
-        oid[i] = bid
 
 
 @njit(cache=True, nogil=True)
@@ -1930,7 +962,7 @@ def nearest_other_distance(P, verts, cell: float | None = None):
     n = len(P)
     if not len(verts):
         return np.zeros(0)
-    _check_index("verts", verts, n)
+    check_index("verts", verts, n)
     if not np.isfinite(P).all():
         raise ValueError("nearest_other_distance: points must be finite")
     lo = P.min(0)
@@ -1945,77 +977,6 @@ def nearest_other_distance(P, verts, cell: float | None = None):
             break
         cell *= 1.25
     return _grid_nearest_other(P, verts, lo, cell, dims)
-
-
-
-class TriangleBVH:
-    """Exact closest points on a fixed set of triangles (float64), for many query points.
-
-    Built once (:func:`_bvh_build`, leaves of up to ``leaf`` triangles; 23.5k triangles in
-    about 10 ms); each query descends the tree nearer child first and skips every box
-    farther than the best distance found so far. The answer is the closest point of
-    :func:`closest_on_triangles`'s formula on the triangle whose squared distance (numpy's
-    row-norm sum) is least, the lowest triangle index on a tie: it does not depend on the
-    tree's layout, the order of the queries or the number of threads answering them.
-
-    ``points`` (n, 3) float64, ``triangles`` (t, 3) int64 with indices in range (checked by
-    the caller, :class:`shellmesh_mdao.project.SurfaceLocator`)."""
-
-    LEAF = 8
-    #: fewest queries a thread of :meth:`closest` takes: two threads already pay from about
-    #: 600 queries on the 23.5k-triangle cessna210 (1,000 queries 0.94 -> 0.63 ms; a thread
-    #: costs some 0.05 ms to start)
-    MIN_BLOCK = 512
-
-    def __init__(self, points, triangles, leaf: int = LEAF):
-        P = np.ascontiguousarray(points, dtype=np.float64)
-        T = np.ascontiguousarray(triangles, dtype=np.int64)
-        A, B, C = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
-        tlo = np.minimum(np.minimum(A, B), C)
-        thi = np.maximum(np.maximum(A, B), C)
-        perm, self._box, self._child, self._start, self._cnt = _bvh_build(tlo, thi, int(leaf))
-        self._tri_id = perm
-        self._pos = np.empty(len(perm), np.int64)                 # leaf-order position of each triangle
-        self._pos[perm] = np.arange(len(perm))
-        self._V = np.ascontiguousarray(np.hstack([A[perm], B[perm], C[perm]]))      # corners in leaf order
-        self._TB = np.ascontiguousarray(np.hstack([tlo[perm], thi[perm]]))
-        ext = float(np.abs(P).max()) if len(P) else 0.0
-        # coordinates round at about 1e-16 of their magnitude: boxes and closest points that
-        # far apart still count as touching
-        self._slack = (1e-12 * ext) ** 2
-
-    @property
-    def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self._box, self._child, self._start, self._cnt, self._tri_id, self._pos,
-                                      self._V, self._TB))
-
-    def closest(self, q, threads: int = 1, hint=None):
-        """``(points (k, 3), triangle (k,))`` for queries ``q`` (k, 3) float64 (finite: checked
-        by the caller); with ``threads`` > 1, contiguous blocks of at least :attr:`MIN_BLOCK`
-        queries are answered in up to that many threads (the kernel releases the GIL). ``hint`` (k,): a
-        triangle near each query to try first (-1 or out of range: none), e.g. the one a point
-        that has since moved a little was closest to; it saves a part of the search and does
-        not change the answer."""
-        q = np.ascontiguousarray(q, dtype=np.float64)
-        k = len(q)
-        out = np.empty((k, 3))
-        oid = np.empty(k, np.int64)
-        seed = np.empty(0, np.int64)
-        if hint is not None:
-            hint = np.asarray(hint, dtype=np.int64).reshape(-1)
-            if len(hint) != k:
-                raise ValueError(f"TriangleBVH.closest: hint needs one entry per query, got {len(hint)} for {k}")
-            ok = (hint >= 0) & (hint < len(self._pos))
-            seed = np.where(ok, self._pos[np.where(ok, hint, 0)], -1)
-        args = (self._V, self._TB, self._tri_id, self._box, self._child, self._start, self._cnt, self._slack,
-                out, oid, seed)
-        nt = max(1, min(int(threads), k // self.MIN_BLOCK))
-        cuts = np.linspace(0, k, nt + 1).astype(np.int64)
-        workers = [_Background(_bvh_closest, q, int(cuts[j]), int(cuts[j + 1]), *args) for j in range(1, nt)]
-        _bvh_closest(q, int(cuts[0]), int(cuts[1]), *args)
-        for w in workers:
-            w.result()
-        return out, oid
 
 
 # ============================================================================ scatter
@@ -2040,8 +1001,8 @@ def pair_difference(i, j, w, rv, n):
     rv = np.ascontiguousarray(rv, dtype=np.float64).reshape(-1, 3)
     if not (len(i) == len(j) == len(w) == len(rv)):
         raise ValueError("pair_difference needs one i, j, w and rv per pair")
-    _check_index("i", i, int(n))
-    _check_index("j", j, int(n))
+    check_index("i", i, int(n))
+    check_index("j", j, int(n))
     return _pair_difference(i, j, w, rv, int(n))
 
 
@@ -2066,7 +1027,7 @@ def _corner_max_turn(faces, vn, fn, n):
         for k in range(faces.shape[1]):
             v = faces[f, k]
             if v >= 0:
-                x = 1.0 - _dot3e(vn[v, 0], vn[v, 1], vn[v, 2], fn[f, 0], fn[f, 1], fn[f, 2])
+                x = 1.0 - dot3e(vn[v, 0], vn[v, 1], vn[v, 2], fn[f, 0], fn[f, 1], fn[f, 2])
                 a = kap[v]
                 if a == a and (x != x or x > a):      # np.maximum: a NaN on either side wins
                     kap[v] = x
@@ -2081,7 +1042,7 @@ def corner_sums(faces, av, n):
     av = np.ascontiguousarray(av, dtype=np.float64).reshape(-1, 3)
     if faces.ndim != 2 or len(faces) != len(av):
         raise ValueError("corner_sums needs (m, k) faces and one (3,) vector per face")
-    _check_index("faces", faces[faces >= 0], int(n))
+    check_index("faces", faces[faces >= 0], int(n))
     return _corner_sums(faces, av, int(n))
 
 
@@ -2093,7 +1054,7 @@ def corner_max_turn(faces, vn, fn, n):
     fn = np.ascontiguousarray(fn, dtype=np.float64).reshape(-1, 3)
     if faces.ndim != 2 or len(faces) != len(fn) or len(vn) != int(n):
         raise ValueError("corner_max_turn needs (m, k) faces, one normal per face and one per vertex")
-    _check_index("faces", faces[faces >= 0], int(n))
+    check_index("faces", faces[faces >= 0], int(n))
     return _corner_max_turn(faces, vn, fn, int(n))
 
 
@@ -2118,7 +1079,7 @@ def centroid_d2(P, T, x):
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
     T = np.ascontiguousarray(np.asarray(T)[:, :3], dtype=np.int64)
     x = np.asarray(x, dtype=np.float64).reshape(3)
-    _check_index("T", T, len(P))
+    check_index("T", T, len(P))
     return _centroid_d2(P, T, float(x[0]), float(x[1]), float(x[2]))
 
 
@@ -2130,10 +1091,10 @@ def _on_segment_ab(q0, q1, q2, a, ab, s):
     of 0 on a zero-length segment, row norms)."""
     a0, a1, a2 = a[s, 0], a[s, 1], a[s, 2]
     e0, e1, e2 = ab[s, 0], ab[s, 1], ab[s, 2]
-    L2 = _dot3e(e0, e1, e2, e0, e1, e2)
-    t = _clip01(_dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0))
+    L2 = dot3e(e0, e1, e2, e0, e1, e2)
+    t = clip01(dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0))
     x0, x1, x2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
-    return t, x0, x1, x2, np.sqrt(_sq_dist(x0, x1, x2, q0, q1, q2))
+    return t, x0, x1, x2, np.sqrt(sq_dist(x0, x1, x2, q0, q1, q2))
 
 
 @njit(cache=True, nogil=True)
@@ -2231,78 +1192,6 @@ def segments_scan(q, lo, hi, a, ab):
     return _segments_scan(q, lo, hi, a, ab)
 
 
-# ============================================================================ rows of three
-# The per-row vector formulas of the remesh, the imprint and the smoother, called thousands of
-# times a run on a few hundred to a few thousand rows, where numpy's per-call overhead and
-# temporaries cost more than the arithmetic. Each takes C-contiguous float64 arrays from its
-# wrapper (which sends anything else to numpy) and does numpy's arithmetic in numpy's order.
-@njit(cache=True, nogil=True, inline="always")
-def _dot3e(x0, x1, x2, y0, y1, y2):
-    """einsum's sum of three products, sign of zero included: einsum adds the sum to an output
-    that starts at +0, so a sum of negative zeros comes out +0 (which arctan2 tells apart)."""
-    return _dot3(x0, x1, x2, y0, y1, y2) + 0.0
-
-
-@njit(cache=True, nogil=True)
-def _cross_rows(a, b):
-    k = a.shape[0]
-    out = np.empty((k, 3))
-    for i in range(k):
-        out[i, 0] = a[i, 1] * b[i, 2] - a[i, 2] * b[i, 1]
-        out[i, 1] = a[i, 2] * b[i, 0] - a[i, 0] * b[i, 2]
-        out[i, 2] = a[i, 0] * b[i, 1] - a[i, 1] * b[i, 0]
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _norm_rows(a):
-    k = a.shape[0]
-    out = np.empty(k)
-    for i in range(k):
-        out[i] = _norm3(a[i, 0], a[i, 1], a[i, 2])
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _dot_rows(a, b):
-    k = a.shape[0]
-    out = np.empty(k)
-    for i in range(k):
-        out[i] = _dot3e(a[i, 0], a[i, 1], a[i, 2], b[i, 0], b[i, 1], b[i, 2])
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _dot_norm_rows(a):
-    k = a.shape[0]
-    out = np.empty(k)
-    for i in range(k):
-        out[i] = np.sqrt(_dot3e(a[i, 0], a[i, 1], a[i, 2], a[i, 0], a[i, 1], a[i, 2]))
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _edge_lengths(P, E):
-    k = E.shape[0]
-    out = np.empty(k)
-    for i in range(k):
-        a, b = E[i, 0], E[i, 1]
-        d0, d1, d2 = P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2]
-        out[i] = np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2))
-    return out
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _dot_unit_rows(a):
-    k = a.shape[0]
-    out = np.zeros((k, 3))
-    for i in range(k):
-        n = np.sqrt(_dot3e(a[i, 0], a[i, 1], a[i, 2], a[i, 0], a[i, 1], a[i, 2]))
-        if n > 0:
-            out[i, 0], out[i, 1], out[i, 2] = a[i, 0] / n, a[i, 1] / n, a[i, 2] / n
-    return out
-
-
 @njit(cache=True, nogil=True)
 def _element_normals(P, faces, is_tri):
     k = faces.shape[0]
@@ -2313,13 +1202,13 @@ def _element_normals(P, faces, is_tri):
         if not (0 <= a < n and 0 <= b < n and 0 <= c < n and (is_tri[i] or 0 <= faces[i, 3] < n)):
             return None
         if is_tri[i]:
-            x0, x1, x2 = _cross3(P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2],
+            x0, x1, x2 = cross3(P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2],
                                  P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2])
         else:
             d = faces[i, 3]
-            x0, x1, x2 = _cross3(P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2],
+            x0, x1, x2 = cross3(P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2],
                                  P[d, 0] - P[b, 0], P[d, 1] - P[b, 1], P[d, 2] - P[b, 2])
-        L = np.sqrt(_dot3e(x0, x1, x2, x0, x1, x2))
+        L = np.sqrt(dot3e(x0, x1, x2, x0, x1, x2))
         if L > 0:
             out[i, 0], out[i, 1], out[i, 2] = x0 / L, x1 / L, x2 / L
     return out
@@ -2337,73 +1226,8 @@ def element_normals(P, faces, is_tri):
         raise ValueError("element_normals takes (m, 4) faces and one is_tri entry per face")
     out = _element_normals(P, faces, is_tri)
     if out is None:                    # an index out of range, found in the loop: say which
-        _check_index("faces", np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]]), len(P))
+        check_index("faces", np.concatenate([faces[:, :3].reshape(-1), faces[~is_tri, 3]]), len(P))
         raise ValueError(f"faces holds indices outside [0, {len(P)})")
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _faces_at(ptr, vf, verts, m):
-    mark = np.zeros(m, np.bool_)
-    cnt = 0
-    for i in range(verts.shape[0]):
-        v = verts[i]
-        if not 0 <= v < ptr.shape[0] - 1 or not 0 <= ptr[v] <= ptr[v + 1] <= vf.shape[0]:
-            return None
-        for p in range(ptr[v], ptr[v + 1]):
-            if not 0 <= vf[p] < m:
-                return None
-            if not mark[vf[p]]:
-                mark[vf[p]] = True
-                cnt += 1
-    out = np.empty(cnt, np.int64)
-    k = 0
-    for f in range(m):
-        if mark[f]:
-            out[k] = f
-            k += 1
-    return out
-
-
-def faces_at(ptr, vf, verts, m):
-    """Sorted ids of the faces incident to the vertices ``verts``, with the vertex-face CSR
-    ``ptr``/``vf`` (:func:`vertex_faces`) of ``m`` faces."""
-    ptr, vf, verts = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (ptr, vf, verts))
-    out = _faces_at(ptr, vf, verts, int(m))
-    if out is None:                    # found in the loop: say which
-        _check_index("verts", verts, len(ptr) - 1)
-        _check_index("vf", vf, int(m))
-        raise ValueError("faces_at: ptr must be row pointers into vf")
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _tri_normals(P, F):
-    k = F.shape[0]
-    out = np.empty((k, 3))
-    for i in range(k):
-        a, b, c = F[i, 0], F[i, 1], F[i, 2]
-        out[i, 0], out[i, 1], out[i, 2] = _cross3(P[b, 0] - P[a, 0], P[b, 1] - P[a, 1], P[b, 2] - P[a, 2],
-                                                  P[c, 0] - P[a, 0], P[c, 1] - P[a, 1], P[c, 2] - P[a, 2])
-    return out
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _sin_cos(u0, u1, u2, v0, v1, v2):
-    """(|u x v|, u . v) with numpy's sums (einsum order for both)."""
-    c0, c1, c2 = _cross3(u0, u1, u2, v0, v1, v2)
-    return np.sqrt(_dot3e(c0, c1, c2, c0, c1, c2)), _dot3e(u0, u1, u2, v0, v1, v2)
-
-
-@njit(cache=True, nogil=True)
-def _corner_sin_cos(A, B, C):
-    k = A.shape[0]
-    out = np.empty((4, k))
-    for i in range(k):
-        out[0, i], out[1, i] = _sin_cos(B[i, 0] - A[i, 0], B[i, 1] - A[i, 1], B[i, 2] - A[i, 2],
-                                        C[i, 0] - A[i, 0], C[i, 1] - A[i, 1], C[i, 2] - A[i, 2])
-        out[2, i], out[3, i] = _sin_cos(C[i, 0] - B[i, 0], C[i, 1] - B[i, 1], C[i, 2] - B[i, 2],
-                                        A[i, 0] - B[i, 0], A[i, 1] - B[i, 1], A[i, 2] - B[i, 2])
     return out
 
 
@@ -2414,597 +1238,6 @@ def _corner_cosines(X):
     for i in range(k):
         _corner_cos3(X[i, 0], X[i, 1], X[i, 2], out, i)
     return out
-
-
-@njit(cache=True, nogil=True)
-def _facing_ok(F, kind, vtri, tri_n, nrm, cos_facing):
-    k = F.shape[0]
-    out = np.empty(k, np.bool_)
-    for i in range(k):
-        any_reg = False
-        best = -2.0
-        nan = False
-        for j in range(3):
-            v = F[i, j]
-            if kind[v] == 0 and vtri[v] >= 0:
-                any_reg = True
-                t = vtri[v]
-                d = _dot3e(nrm[i, 0], nrm[i, 1], nrm[i, 2], tri_n[t, 0], tri_n[t, 1], tri_n[t, 2])
-                if d != d:
-                    nan = True
-                elif d > best:
-                    best = d
-        out[i] = (not any_reg) or ((not nan) and best > cos_facing)
-    return out
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _max_nan(cur, v):
-    """np.maximum(cur, v): a NaN on either side wins."""
-    if cur != cur:
-        return cur
-    if v != v or v > cur:
-        return v
-    return cur
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _min_nan(cur, v):
-    """np.minimum(cur, v) for comparisons: a NaN on either side wins."""
-    if cur != cur:
-        return cur
-    if v != v or v < cur:
-        return v
-    return cur
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
-    any_reg = False
-    best = -2.0
-    nan = False
-    for v in (q0, q1, q2):
-        if kind[v] == 0 and vtri[v] >= 0:
-            any_reg = True
-            t = vtri[v]
-            d = _dot3e(n0, n1, n2, tri_n[t, 0], tri_n[t, 1], tri_n[t, 2])
-            if d != d:
-                nan = True
-            elif d > best:
-                best = d
-    return (not any_reg) or ((not nan) and best > cos_facing)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _tri_min_deg(A, B, C):
-    """Smallest angle (degrees) of triangle (A, B, C) as ``remesh._min_angle_of`` computes it
-    (the corners at A and B by arctan2, the third what remains of pi; a NaN wins), with the C
-    library's atan2 instead of numpy's."""
-    s0, c0 = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
-    s1, c1 = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2], A[0] - B[0], A[1] - B[1], A[2] - B[2])
-    a0 = math.atan2(s0, c0)
-    a1 = math.atan2(s1, c1)
-    return _min_nan(_min_nan(a0, a1), np.pi - a0 - a1) * (180.0 / np.pi)
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _collapse_score(ai, bi, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n,
-                    cos_facing):
-    """The tests of :func:`collapse_select` for one pair: rmax of collapsing ``ai`` into ``bi``,
-    inf where a test fails."""
-    r_max = 0.0
-    for p in range(nptr[ai], nptr[ai + 1]):
-        x = nbr[p]
-        if x == bi:
-            continue
-        d0, d1, d2 = P[x, 0] - P[bi, 0], P[x, 1] - P[bi, 1], P[x, 2] - P[bi, 2]
-        r = np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2)) / (0.5 * (h[x] + h[bi]))
-        if r_max == r_max and (r != r or r > r_max):
-            r_max = r
-    if not r_max <= max_len_ratio:
-        return np.inf
-    cmin = np.inf
-    amin_old = np.inf
-    amin_new = np.inf
-    hb2 = 1e-30 * (h[bi] * h[bi])
-    for p in range(fptr[ai], fptr[ai + 1]):
-        f = vf[p]
-        c0, c1, c2 = F[f, 0], F[f, 1], F[f, 2]
-        amin_old = _min_nan(amin_old, _tri_min_deg(P[c0], P[c1], P[c2]))
-        if c0 == bi or c1 == bi or c2 == bi:
-            continue
-        q0 = bi if c0 == ai else c0
-        q1 = bi if c1 == ai else c1
-        q2 = bi if c2 == ai else c2
-        A, B, C = P[q0], P[q1], P[q2]
-        n0, n1, n2, area = _unit_normal_area(A, B, C)
-        cosn = _dot3e(n0, n1, n2, fn_old[f, 0], fn_old[f, 1], fn_old[f, 2])
-        cmin = _min_nan(cmin, cosn if area > hb2 else -2.0)
-        if not _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
-            return np.inf
-        amin_new = _min_nan(amin_new, _tri_min_deg(A, B, C))
-    if not cmin > cos_turn:
-        return np.inf
-    if not amin_new >= _min_nan(5.0, 0.5 * amin_old):
-        return np.inf
-    return r_max
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _facing_score(ai, bi, fptr, vf, F, P, kind, vtri, tri_n, cos_facing, bvh_V, bvh_TB, bvh_id, bvh_box, bvh_child,
-                  bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout, noseed):
-    """The micro collapses' test of collapsing ``ai`` into ``bi``: no new face standing across
-    the input (:func:`_facing_one`) nor facing against the input triangle closest to its
-    centroid (the :class:`TriangleBVH` arrays, queries shifted by ``center`` as
-    ``SurfaceLocator.closest`` does); the edge's length, inf where a face fails."""
-    for p in range(fptr[ai], fptr[ai + 1]):
-        f = vf[p]
-        c0, c1, c2 = F[f, 0], F[f, 1], F[f, 2]
-        if c0 == bi or c1 == bi or c2 == bi:
-            continue
-        q0 = bi if c0 == ai else c0
-        q1 = bi if c1 == ai else c1
-        q2 = bi if c2 == ai else c2
-        n0, n1, n2 = _unit_normal(P[q0], P[q1], P[q2])
-        if not _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
-            return np.inf
-        for k in range(3):
-            q[0, k] = (P[q0, k] + P[q1, k] + P[q2, k]) / 3 - center[k]
-        _bvh_closest(q, 0, 1, bvh_V, bvh_TB, bvh_id, bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, qout, qid,
-                     noseed)
-        t = qid[0]
-        if not _dot3e(n0, n1, n2, tri_n[t, 0], tri_n[t, 1], tri_n[t, 2]) > 0:
-            return np.inf
-    d0, d1, d2 = P[ai, 0] - P[bi, 0], P[ai, 1] - P[bi, 1], P[ai, 2] - P[bi, 2]
-    return np.sqrt(_dot3e(d0, d1, d2, d0, d1, d2))
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, max_sub, nptr, nbr, fptr, vf, F, P, h,
-                     max_len_ratio, fn_old, cos_turn, kind, vtri, tri_n, cos_facing, facing_only, bvh_V, bvh_TB,
-                     bvh_id, bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, center):
-    """:func:`_waves` with the collapse tests as the check: :func:`_collapse_score` in both
-    directions of each winner, the one with the smaller rmax taken (u into v on a tie); or,
-    ``facing_only``, :func:`_facing_score` u into v, else v into u."""
-    ncand = alive.shape[0]
-    rtop = rptr[:-1].copy()
-    resolved = ~alive
-    seen = np.full(ncand, -1, np.int64)
-    out_a = np.empty(ncand, np.int64)
-    out_b = np.empty(ncand, np.int64)
-    q = np.empty((1, 3))
-    qout = np.empty((1, 3))
-    qid = np.empty(1, np.int64)
-    noseed = np.empty(0, np.int64)
-    na = 0
-    win = _first_wave(cptr, cres, rtop, rptr, rcand, resolved, ncand)
-    for wave in range(max_sub):
-        if win.shape[0] == 0:
-            break
-        good = np.zeros(win.shape[0], np.bool_)
-        for i in range(win.shape[0]):
-            c = win[i]
-            s0 = np.inf
-            s1 = np.inf
-            for dirn in range(2):
-                if not dir_ok[c, dirn] or (facing_only and s0 < np.inf):
-                    continue
-                a, b = (u[c], v[c]) if dirn == 0 else (v[c], u[c])
-                if facing_only:
-                    sc = _facing_score(a, b, fptr, vf, F, P, kind, vtri, tri_n, cos_facing, bvh_V, bvh_TB, bvh_id,
-                                       bvh_box, bvh_child, bvh_start, bvh_cnt, bvh_slack, center, q, qid, qout,
-                                       noseed)
-                else:
-                    sc = _collapse_score(a, b, nptr, nbr, fptr, vf, F, P, h, max_len_ratio, fn_old, cos_turn, kind,
-                                         vtri, tri_n, cos_facing)
-                if dirn == 0:
-                    s0 = sc
-                else:
-                    s1 = sc
-            if s0 < np.inf or s1 < np.inf:
-                good[i] = True
-                if s1 < s0:
-                    out_a[na], out_b[na] = v[c], u[c]
-                else:
-                    out_a[na], out_b[na] = u[c], v[c]
-                na += 1
-        if wave + 1 == max_sub:
-            break
-        win = _next_wave(win, good, cptr, cres, rtop, rptr, rcand, resolved, seen, wave)
-    return out_a[:na], out_b[:na]
-
-
-@njit(cache=True, nogil=True)
-def _collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, rf, use_rf):
-    n = nptr.shape[0] - 1
-    k = cand.shape[0]
-    boundary = np.zeros(n, np.bool_)
-    for e in range(E.shape[0]):
-        if valence[e] == 1:
-            boundary[E[e, 0]] = True
-            boundary[E[e, 1]] = True
-    u = np.empty(k, np.int64)
-    v = np.empty(k, np.int64)
-    for i in range(k):
-        u[i], v[i] = E[cand[i], 0], E[cand[i], 1]
-    common = _common(nptr, nbr, u, v, n)
-    ok = np.zeros(k, np.bool_)
-    dir_ok = np.zeros((k, 2), np.bool_)
-    for i in range(k):
-        e = cand[i]
-        a0 = h0[e]
-        o0 = F[a0 // 3, (a0 % 3 + 2) % 3]
-        good = nptr[o0 + 1] - nptr[o0] > 3
-        a1 = h1[e]
-        if a1 >= 0:
-            o1 = F[a1 // 3, (a1 % 3 + 2) % 3]
-            good = good and nptr[o1 + 1] - nptr[o1] > 3
-        good = good and common[i] == valence[e]
-        good = good and not (valence[e] == 2 and boundary[u[i]] and boundary[v[i]])
-        ok[i] = good
-        for d in range(2):
-            a = u[i] if d == 0 else v[i]
-            b = v[i] if d == 0 else u[i]
-            da = good and (kind[a] == 0 or (kind[a] == 1 and isf[e] and chain_ok[a]))
-            if use_rf:
-                da = da or (good and rf[a] and kind[a] == 2 and isf[e])
-                da = da and not (rf[b] and not rf[a])
-            dir_ok[i, d] = da
-    return ok, dir_ok
-
-
-def collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, remove_first=None):
-    """The remesh's cheap collapse tests of the candidate edges ``cand`` of the edge table
-    ``E`` (``h0``, ``h1``, ``valence`` per edge, as :func:`edge_table` gives them) of the
-    triangles ``F``, with vertex neighbours ``nptr``/``nbr``: ``ok`` (k,) where both opposite
-    vertices keep more than three neighbours, the ends share exactly the edge's faces' apexes
-    as common neighbours (the link condition) and an interior edge does not join two
-    boundary vertices; ``dir_ok`` (k, 2) where the collapse may remove u (into v), v (into u):
-    ``ok`` and the removed vertex regular (kind 0), or on a chain (kind 1) along a feature
-    edge (``isf`` per edge) with ``chain_ok`` (its chain keeps enough vertices). With
-    ``remove_first`` (vertex ids): those vertices may also go when they are corners (kind 2)
-    along a feature edge, and an edge at one of them may only remove it. The numpy tests of
-    ``remesh._collapse_edges`` in one compiled pass (the same masks)."""
-    i64 = lambda x: np.ascontiguousarray(x, dtype=np.int64)     # noqa: E731
-    E = i64(E).reshape(-1, 2)
-    F = i64(F).reshape(-1, 3)
-    cand, h0, h1, valence, nptr, nbr, kind = (i64(x).reshape(-1) for x in (cand, h0, h1, valence, nptr, nbr, kind))
-    isf = np.ascontiguousarray(isf, dtype=np.bool_).reshape(-1)
-    chain_ok = np.ascontiguousarray(chain_ok, dtype=np.bool_).reshape(-1)
-    n = len(nptr) - 1
-    if not len(h0) == len(h1) == len(valence) == len(isf) == len(E) or len(kind) != n or len(chain_ok) != n:
-        raise ValueError("collapse_directions: arrays of mismatched lengths")
-    _check_csr(nptr, nbr)
-    _check_index("E", E, n)
-    _check_index("F", F, n)
-    _check_index("cand", cand, len(E))
-    _check_index("h0", h0, 3 * len(F))
-    if len(h1) and (h1.max(initial=-1) >= 3 * len(F) or h1.min(initial=0) < -1):
-        raise ValueError(f"collapse_directions: h1 must be -1 or below {3 * len(F)}")
-    rf = np.zeros(n if remove_first is not None else 0, np.bool_)
-    if remove_first is not None:
-        remove_first = i64(remove_first).reshape(-1)
-        _check_index("remove_first", remove_first, n)
-        rf[remove_first] = True
-    return _collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain_ok, rf,
-                                remove_first is not None and len(remove_first) > 0)
-
-
-@njit(cache=True, nogil=True)
-def _collapse_apply(F, fpatch, fe, fe_chain, a, b, n):
-    remap = np.arange(n)
-    keepv = np.ones(n, np.bool_)
-    for i in range(a.shape[0]):
-        if not keepv[a[i]]:
-            return None                         # a vertex removed twice
-        remap[a[i]] = b[i]
-        keepv[a[i]] = False
-    for i in range(b.shape[0]):
-        if not keepv[b[i]]:
-            return None                         # a vertex collapsed into a removed one
-    o2n = np.empty(n, np.int64)
-    c = 0
-    for v in range(n):
-        o2n[v] = c
-        if keepv[v]:
-            c += 1
-    m = F.shape[0]
-    F2 = np.empty((m, 3), np.int64)
-    p2 = np.empty(m, fpatch.dtype)
-    k = 0
-    for f in range(m):
-        x, y, z = remap[F[f, 0]], remap[F[f, 1]], remap[F[f, 2]]
-        if x != y and y != z and x != z:
-            F2[k, 0], F2[k, 1], F2[k, 2] = o2n[x], o2n[y], o2n[z]
-            p2[k] = fpatch[f]
-            k += 1
-    # the feature edges remapped, each row (lo, hi), degenerate rows dropped, then sorted by
-    # (lo, hi, chain) with ties in row order (three stable counting passes, last key first)
-    # and one row per pair: remesh._Work.set_features' table, renumbered
-    ne = fe.shape[0]
-    lo = np.empty(ne, np.int64)
-    hi = np.empty(ne, np.int64)
-    rows = np.empty(ne, np.int64)
-    r = 0
-    cmin = 0
-    cmax = 0
-    for i in range(ne):
-        x, y = remap[fe[i, 0]], remap[fe[i, 1]]
-        if x == y:
-            continue
-        lo[i], hi[i] = (x, y) if x < y else (y, x)
-        if r == 0 or fe_chain[i] < cmin:
-            cmin = fe_chain[i]
-        if r == 0 or fe_chain[i] > cmax:
-            cmax = fe_chain[i]
-        rows[r] = i
-        r += 1
-    rows = rows[:r]
-    key = np.empty(ne, np.int64)
-    for i in range(r):
-        key[rows[i]] = fe_chain[rows[i]] - cmin
-    rows = _counting_order(key, cmax - cmin + 1, rows) if r else rows
-    rows = _counting_order(hi, n, rows) if r else rows
-    rows = _counting_order(lo, n, rows) if r else rows
-    fe2 = np.empty((r, 2), np.int64)
-    ch2 = np.empty(r, np.int64)
-    q = 0
-    for j in range(r):
-        i = rows[j]
-        if q and lo[i] == lo[rows[j - 1]] and hi[i] == hi[rows[j - 1]]:
-            continue
-        fe2[q, 0], fe2[q, 1] = o2n[lo[i]], o2n[hi[i]]
-        ch2[q] = fe_chain[i]
-        q += 1
-    return F2[:k], p2[:k], fe2[:q], ch2[:q], keepv
-
-
-def collapse_apply(F, fpatch, fe, fe_chain, a, b, n):
-    """A batch of edge collapses (vertex ``a[i]`` into ``b[i]``, none of the ``b`` removed) on
-    the triangles ``F`` (m, 3) with patches ``fpatch`` and the feature edges ``fe`` (k, 2) with
-    chain ids ``fe_chain``, on ``n`` vertices. Returns ``(F, fpatch, fe, fe_chain, keep)``: the
-    faces left (the two at each collapsed edge drop out, the rest keep their order), the
-    feature edges as ``remesh._Work.set_features`` tabulates them (rows (lo, hi) sorted by
-    (lo, hi, chain), degenerate rows dropped, one row per pair, the lowest chain), both on
-    the vertices renumbered without the removed ones, and ``keep`` (n,) the vertices left.
-    The numpy update ``remesh._collapse_edges`` made before it (remap, face filter,
-    set_features, renumbering) in one compiled pass (the same arrays)."""
-    i64 = lambda x: np.ascontiguousarray(x, dtype=np.int64)     # noqa: E731
-    F = i64(F).reshape(-1, 3)
-    fe = i64(fe).reshape(-1, 2)
-    fpatch = np.ascontiguousarray(fpatch).reshape(-1)
-    fe_chain, a, b = (i64(x).reshape(-1) for x in (fe_chain, a, b))
-    n = int(n)
-    if len(fpatch) != len(F) or len(fe_chain) != len(fe) or len(a) != len(b):
-        raise ValueError("collapse_apply: arrays of mismatched lengths")
-    for name, x in (("F", F), ("fe", fe), ("a", a), ("b", b)):
-        _check_index(name, x, n)
-    out = _collapse_apply(F, fpatch, fe, fe_chain, a, b, n)
-    if out is None:
-        raise ValueError("collapse_apply: each vertex is removed at most once and none into a removed one")
-    return out
-
-
-def collapse_select(nptr, nbr, fptr, vf, F, P, h, u, v, rank, dir_ok, *, kind, vtri, tri_n, cos_facing,
-                    max_len_ratio=np.inf, fn_old=None, cos_turn=-1.0, surface=None, max_sub=16):
-    """The remesh's batch of edge collapses: :func:`greedy_independent_rings` over the
-    candidate edges (``u``, ``v``; ``rank`` higher first; closed 1-rings of both ends as the
-    lock regions), every winner checked in both allowed directions (``dir_ok`` (k, 2): u into
-    v, v into u) by the geometric tests of collapsing a vertex ``a`` into ``b``, in one
-    compiled pass (no call back into Python per sub-round):
-
-    - ``rmax``, the largest ratio of a new edge to the mean local size ``h`` of its ends, at
-      most ``max_len_ratio``;
-    - no face around ``a`` that keeps its area turning its unit normal away from ``fn_old``
-      to a cosine of ``cos_turn`` or less;
-    - no new face standing across the input (:func:`facing_ok` with ``kind``, ``vtri``,
-      ``tri_n``, ``cos_facing``);
-    - the smallest angle of the new faces at least min(5, half the smallest angle of the
-      faces around ``a`` before), in degrees.
-
-    A winner passing in a direction is collapsed, in the direction of the smaller rmax (u into
-    v on a tie).
-
-    With ``surface`` (a :class:`TriangleBVH` of the input and the ``center`` its triangles were
-    shifted by: ``(bvh, center)``) only the facing tests run, u into v first, else v into u: no
-    new face standing across the input, nor facing against the input triangle closest to its
-    centroid (the remesh's micro collapses; ``h``, ``max_len_ratio``, ``fn_old`` and
-    ``cos_turn`` are not used).
-
-    Returns ``(a, b)``: the vertices removed and where each goes, in the order
-    the sub-rounds took them. ``nptr``/``nbr``: vertex neighbours; ``fptr``/``vf``: faces
-    around each vertex; ``F`` (m, 3) faces on the points ``P``. The angles use the C
-    library's atan2 (numpy's AVX-512 loop gives other last bits: see the module's note); a
-    test that an angle equal to the bound to the last bit decides could go the other way."""
-    def i64(x):
-        return np.ascontiguousarray(x, dtype=np.int64)
-
-    def f64(x):
-        return np.ascontiguousarray(x, dtype=np.float64)
-    nptr, nbr, fptr, vf, u, v, kind, vtri = (i64(x) for x in (nptr, nbr, fptr, vf, u, v, kind, vtri))
-    F = i64(F).reshape(-1, 3)
-    if fn_old is None:
-        fn_old = np.zeros((len(F), 3))
-    P, fn_old, tri_n = (f64(x).reshape(-1, 3) for x in (P, fn_old, tri_n))
-    h = f64(h)
-    dir_ok = np.ascontiguousarray(dir_ok, dtype=np.bool_).reshape(-1, 2)
-    n = len(P)
-    if len(nptr) != n + 1 or len(fptr) != n + 1 or len(h) != n or len(kind) != n or len(vtri) != n \
-            or len(fn_old) != len(F):
-        raise ValueError("collapse_select: arrays of mismatched lengths")
-    if not len(u) == len(v) == len(rank) == len(dir_ok):
-        raise ValueError(f"collapse_select: u, v, rank and dir_ok need one entry per candidate, got {len(u)}, "
-                         f"{len(v)}, {len(rank)} and {len(dir_ok)}")
-    _check_csr(nptr, nbr)
-    if fptr[0] != 0 or fptr[-1] != len(vf) or (np.diff(fptr) < 0).any():
-        raise ValueError("fptr must be CSR row pointers into vf")
-    _check_index("vf", vf, len(F))
-    _check_index("F", F, n)
-    _check_index("u", u, n)
-    _check_index("v", v, n)
-    if len(vtri) and vtri.max(initial=-1) >= len(tri_n):
-        raise ValueError(f"collapse_select: vertex triangles must be below {len(tri_n)}")
-    rank = _dense_rank(rank)
-    ncand = len(rank)
-    if not ncand:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    alive = dir_ok[:, 0] | dir_ok[:, 1]
-    cptr, cres, rptr, rcand = _build_rings(nptr, nbr, u, v, alive, rank, ncand, n)
-    if surface is None:
-        # no tree to query (the sweeps' tests): empty arrays of the tree's types
-        tree = (np.empty((0, 9)), np.empty((0, 6)), np.empty(0, np.int64), np.empty((0, 6)), np.empty(0, np.int64),
-                np.empty(0, np.int64), np.empty(0, np.int64), 0.0)
-        center = np.zeros(3)
-    else:
-        bvh, center = surface
-        center = f64(center).reshape(3)
-        if len(tri_n) != len(bvh._tri_id):
-            raise ValueError("collapse_select: tri_n needs one normal per triangle of the surface")
-        tree = (bvh._V, bvh._TB, bvh._tri_id, bvh._box, bvh._child, bvh._start, bvh._cnt, bvh._slack)
-    return _collapse_select(cptr, cres, rptr, rcand, alive, u, v, dir_ok, int(max_sub), nptr, nbr, fptr, vf, F, P,
-                            h, float(max_len_ratio), fn_old, float(cos_turn), kind, vtri, tri_n, float(cos_facing),
-                            surface is not None, *tree, center)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _unit_normal_area(a, b, c):
-    """Unit normal of triangle (a, b, c) (3-vectors): cross(b - a, c - a) over its einsum norm,
-    zero when that is not positive; and that norm (twice the area)."""
-    n0, n1, n2 = _cross3(b[0] - a[0], b[1] - a[1], b[2] - a[2], c[0] - a[0], c[1] - a[1], c[2] - a[2])
-    L = np.sqrt(_dot3e(n0, n1, n2, n0, n1, n2))
-    if L > 0:
-        return n0 / L, n1 / L, n2 / L, L
-    return 0.0, 0.0, 0.0, L
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _unit_normal(a, b, c):
-    """:func:`_unit_normal_area` without the area."""
-    n0, n1, n2, _ = _unit_normal_area(a, b, c)
-    return n0, n1, n2
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _tri_args(A, B, C, out, j, i):
-    """corner_sin_cos arguments of triangle (A, B, C) into out[j, :, i]."""
-    out[j, 0, i], out[j, 1, i] = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
-    out[j, 2, i], out[j, 3, i] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2], A[0] - B[0], A[1] - B[1], A[2] - B[2])
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, cosmax, kind, vtri, tri_n, cos_facing, valence, deg, tgt):
-    ne = E.shape[0]
-    out_e = np.empty(ne, np.int64)
-    abcd = np.empty((ne, 4), np.int64)
-    ff = np.empty((ne, 2), np.int64)
-    gains = np.empty(ne)
-    m0 = np.empty((ne, 3))
-    m1 = np.empty((ne, 3))
-    sc = np.empty((4, 4, ne))
-    k = 0
-    for e in range(ne):
-        if h1[e] < 0 or isf[e]:
-            continue
-        f0, s0 = h0[e] // 3, h0[e] % 3
-        f1, s1 = h1[e] // 3, h1[e] % 3
-        a = F[f0, s0]
-        b = F[f0, (s0 + 1) % 3]
-        c = F[f0, (s0 + 2) % 3]
-        d = F[f1, (s1 + 2) % 3]
-        if c == d or fpatch[f0] != fpatch[f1]:
-            continue
-        if _edge_id(E, kptr, c, d) >= 0:
-            continue
-        gain = 0.0
-        if valence:
-            ea, eb, ec, ed = deg[a] - tgt[a], deg[b] - tgt[b], deg[c] - tgt[c], deg[d] - tgt[d]
-            before = ea * ea + eb * eb + ec * ec + ed * ed
-            xa, xb = deg[a] + -1.0 - tgt[a], deg[b] + -1.0 - tgt[b]
-            xc, xd = deg[c] + 1.0 - tgt[c], deg[d] + 1.0 - tgt[d]
-            after = xa * xa + xb * xb + xc * xc + xd * xd
-            gain = before - after
-            if not gain > 0:
-                continue
-        Pa, Pb, Pc, Pd = P[a], P[b], P[c], P[d]
-        x0, x1, x2 = _unit_normal(Pa, Pb, Pc)
-        y0, y1, y2 = _unit_normal(Pb, Pa, Pd)
-        if not _dot3e(x0, x1, x2, y0, y1, y2) > cosmax:
-            continue
-        p0, p1, p2 = _unit_normal(Pa, Pd, Pc)
-        q0, q1, q2 = _unit_normal(Pd, Pb, Pc)
-        if not (_dot3e(p0, p1, p2, x0, x1, x2) > cosmax and _dot3e(p0, p1, p2, y0, y1, y2) > cosmax
-                and _dot3e(q0, q1, q2, x0, x1, x2) > cosmax and _dot3e(q0, q1, q2, y0, y1, y2) > cosmax):
-            continue
-        if not (_facing_one(a, d, c, kind, vtri, tri_n, p0, p1, p2, cos_facing)
-                and _facing_one(d, b, c, kind, vtri, tri_n, q0, q1, q2, cos_facing)):
-            continue
-        out_e[k] = e
-        abcd[k, 0], abcd[k, 1], abcd[k, 2], abcd[k, 3] = a, b, c, d
-        ff[k, 0], ff[k, 1] = f0, f1
-        gains[k] = gain
-        _tri_args(Pa, Pb, Pc, sc, 0, k)
-        _tri_args(Pb, Pa, Pd, sc, 1, k)
-        _tri_args(Pa, Pd, Pc, sc, 2, k)
-        _tri_args(Pd, Pb, Pc, sc, 3, k)
-        m0[k, 0], m0[k, 1], m0[k, 2] = p0, p1, p2
-        m1[k, 0], m1[k, 1], m1[k, 2] = q0, q1, q2
-        k += 1
-    return out_e[:k], abcd[:k], ff[:k], gains[:k], m0[:k], m1[:k], sc[:, :, :k]
-
-
-def flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, cosmax, kind, vtri, tri_n, cos_facing, deg=None, tgt=None):
-    """The remesh's edge flips allowed on their own, up to the angles, in one pass over the
-    edge table (``E`` (e, 2) rows ``(lo, hi)`` sorted, ``kptr`` as in :func:`edge_lookup`;
-    ``h0``/``h1`` each edge's half-edges ``3 f + slot``, ``h1 < 0`` on a border; ``isf`` the
-    feature edges, never flipped). Edge a-b of the triangles (a, b, c) and (b, a, d) may become
-    c-d when c != d, c-d is not an edge yet, both faces are on one patch (``fpatch``), with
-    ``deg``/``tgt`` (valence mode) the squared distances of the four valences ``deg`` to their
-    targets ``tgt`` fall (``gain > 0``), and the old pair's unit normals are within ``cosmax`` (a
-    cosine) of each other, both new faces' normals within it of both old ones, and neither new
-    face stands across the input (:func:`facing_ok`).
-
-    Returns, for those flips in edge order, ``(edge, abcd (k, 4), faces (k, 2), gain, m0, m1,
-    sc)``: ``gain`` the valence gain (0 without ``deg``), ``m0``/``m1`` the unit normals of the
-    new faces (a, d, c) and (d, b, c), ``sc`` (4, 4, k) the :func:`corner_sin_cos` arguments of
-    the triangles (a, b, c), (b, a, d), (a, d, c) and (d, b, c) for numpy's ``arctan2``. The
-    bits of the numpy formulas of ``remesh._flip_round``."""
-    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
-    kptr, h0, h1, fpatch, kind, vtri = (np.ascontiguousarray(x, dtype=np.int64)
-                                        for x in (kptr, h0, h1, fpatch, kind, vtri))
-    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
-    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
-    tri_n = np.ascontiguousarray(tri_n, dtype=np.float64).reshape(-1, 3)
-    isf = np.ascontiguousarray(isf, dtype=np.bool_)
-    n = len(P)
-    valence = deg is not None
-    deg = np.ascontiguousarray(deg if valence else np.zeros(n), dtype=np.float64)
-    tgt = np.ascontiguousarray(tgt if valence else np.zeros(n), dtype=np.float64)
-    if not (len(h0) == len(h1) == len(isf) == len(E)) or len(kptr) != n + 1 or len(fpatch) != len(F) \
-            or len(kind) != n or len(vtri) != n or len(deg) != n or len(tgt) != n:
-        raise ValueError("flip_candidates: arrays of mismatched lengths")
-    _check_index("E", E, n)
-    _check_index("F", F, n)
-    if kptr[0] != 0 or kptr[-1] != len(E) or (np.diff(kptr) < 0).any():
-        raise ValueError("kptr must be row pointers into E")
-    _check_index("h0", h0, 3 * len(F))
-    if h1.max(initial=-1) >= 3 * len(F):
-        raise ValueError(f"h1 must be below {3 * len(F)}")
-    if vtri.max(initial=-1) >= len(tri_n):
-        raise ValueError(f"flip_candidates: vertex triangles must be below {len(tri_n)}")
-    return _flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, float(cosmax), kind, vtri, tri_n, float(cos_facing),
-                            valence, deg, tgt)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _cross3(a0, a1, a2, b0, b1, b2):
-    """cross_rows' arithmetic on one row."""
-    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _norm3(x, y, z):
-    """norm_rows' sum on one row."""
-    return np.sqrt(x * x + y * y + z * z)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -3024,10 +1257,10 @@ def _corner_cos3(A, B, C, out, i):
         r = 1 if j == 2 else 2
         u0, u1, u2 = X[q][0] - X[p][0], X[q][1] - X[p][1], X[q][2] - X[p][2]
         v0, v1, v2 = X[r][0] - X[p][0], X[r][1] - X[p][1], X[r][2] - X[p][2]
-        den = _norm3(u0, u1, u2) * _norm3(v0, v1, v2)
+        den = norm3(u0, u1, u2) * norm3(v0, v1, v2)
         if den < 1e-300:                          # np.maximum(den, 1e-300): a NaN stays
             den = 1e-300
-        out[i, j] = _dot3e(u0, u1, u2, v0, v1, v2) / den
+        out[i, j] = dot3e(u0, u1, u2, v0, v1, v2) / den
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -3050,28 +1283,28 @@ def _skin_flips(E, kptr, h0, h1, cnt, locked, T, P, active, cmax):
         if active.shape[0] and not (active[p] and active[q]):
             continue
         Pp, Pq, Pr, Ps = P[p], P[q], P[r], P[s]
-        a0, a1, a2 = _cross3(Pq[0] - Pp[0], Pq[1] - Pp[1], Pq[2] - Pp[2], Pr[0] - Pp[0], Pr[1] - Pp[1], Pr[2] - Pp[2])
-        b0, b1, b2 = _cross3(Pp[0] - Pq[0], Pp[1] - Pq[1], Pp[2] - Pq[2], Ps[0] - Pq[0], Ps[1] - Pq[1], Ps[2] - Pq[2])
-        la, lb = _norm3(a0, a1, a2), _norm3(b0, b1, b2)
+        a0, a1, a2 = cross3(Pq[0] - Pp[0], Pq[1] - Pp[1], Pq[2] - Pp[2], Pr[0] - Pp[0], Pr[1] - Pp[1], Pr[2] - Pp[2])
+        b0, b1, b2 = cross3(Pp[0] - Pq[0], Pp[1] - Pq[1], Pp[2] - Pq[2], Ps[0] - Pq[0], Ps[1] - Pq[1], Ps[2] - Pq[2])
+        la, lb = norm3(a0, a1, a2), norm3(b0, b1, b2)
         den = la * lb
         if den < 1e-300:
             den = 1e-300
-        if not _dot3e(a0, a1, a2, b0, b1, b2) / den > cmax:
+        if not dot3e(a0, a1, a2, b0, b1, b2) / den > cmax:
             continue
-        if _edge_id(E, kptr, r, s) >= 0:
+        if edge_id(E, kptr, r, s) >= 0:
             continue
         # the new pair (r, s, q), (s, r, p) against the pair's mean unit normal
-        c0, c1, c2 = _cross3(Ps[0] - Pr[0], Ps[1] - Pr[1], Ps[2] - Pr[2], Pq[0] - Pr[0], Pq[1] - Pr[1], Pq[2] - Pr[2])
-        d0, d1, d2 = _cross3(Pr[0] - Ps[0], Pr[1] - Ps[1], Pr[2] - Ps[2], Pp[0] - Ps[0], Pp[1] - Ps[1], Pp[2] - Ps[2])
+        c0, c1, c2 = cross3(Ps[0] - Pr[0], Ps[1] - Pr[1], Ps[2] - Pr[2], Pq[0] - Pr[0], Pq[1] - Pr[1], Pq[2] - Pr[2])
+        d0, d1, d2 = cross3(Pr[0] - Ps[0], Pr[1] - Ps[1], Pr[2] - Ps[2], Pp[0] - Ps[0], Pp[1] - Ps[1], Pp[2] - Ps[2])
         ma = la if la >= 1e-300 or la != la else 1e-300
         mb = lb if lb >= 1e-300 or lb != lb else 1e-300
         g0, g1, g2 = a0 / ma + b0 / mb, a1 / ma + b1 / mb, a2 / ma + b2 / mb
-        lg = _norm3(g0, g1, g2)
+        lg = norm3(g0, g1, g2)
         if lg < 1e-300:
             lg = 1e-300
         u0, u1, u2 = g0 / lg, g1 / lg, g2 / lg
-        orient[k] = (_dot3e(c0, c1, c2, u0, u1, u2) > cmax * _norm3(c0, c1, c2)) and \
-            (_dot3e(d0, d1, d2, u0, u1, u2) > cmax * _norm3(d0, d1, d2))
+        orient[k] = (dot3e(c0, c1, c2, u0, u1, u2) > cmax * norm3(c0, c1, c2)) and \
+            (dot3e(d0, d1, d2, u0, u1, u2) > cmax * norm3(d0, d1, d2))
         pqrs[k, 0], pqrs[k, 1], pqrs[k, 2], pqrs[k, 3] = p, q, r, s
         ff[k, 0], ff[k, 1] = f0, f1
         _corner_cos_row(P, T[f0, 0], T[f0, 1], T[f0, 2], cos[0], k)
@@ -3103,13 +1336,13 @@ def skin_flips(E, kptr, h0, h1, cnt, locked, T, P, cmax, active=None):
     if not (len(h0) == len(h1) == len(cnt) == len(locked) == len(E)) or len(kptr) != n + 1 \
             or (len(active) and len(active) != n):
         raise ValueError("skin_flips: arrays of mismatched lengths")
-    _check_index("E", E, n)
-    _check_index("T", T, n)
+    check_index("E", E, n)
+    check_index("T", T, n)
     if kptr[0] != 0 or kptr[-1] != len(E) or (np.diff(kptr) < 0).any():
         raise ValueError("kptr must be row pointers into E")
     two = cnt == 2
-    _check_index("h0", h0, 3 * len(T))
-    _check_index("h1", h1[two], 3 * len(T))
+    check_index("h0", h0, 3 * len(T))
+    check_index("h1", h1[two], 3 * len(T))
     return _skin_flips(E, kptr, h0, h1, cnt, locked, T, P, active, float(cmax))
 
 
@@ -3126,8 +1359,8 @@ def _star_moves(rows, tris, T, P, new, nrm):
         C = new[r] if T[t, 2] == r else P[T[t, 2]]
         _corner_cos3(A, B, C, cos_new, i)
         _corner_cos3(P[T[t, 0]], P[T[t, 1]], P[T[t, 2]], cos_old, i)
-        n0, n1, n2 = _cross3(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
-        flip[i] = _dot3e(n0, n1, n2, nrm[t, 0], nrm[t, 1], nrm[t, 2]) <= 0
+        n0, n1, n2 = cross3(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
+        flip[i] = dot3e(n0, n1, n2, nrm[t, 0], nrm[t, 1], nrm[t, 2]) <= 0
     return cos_new, cos_old, flip
 
 
@@ -3186,8 +1419,8 @@ def star_independent(order, ptr, star, ntri: int, rounds: int = 8):
     star = np.ascontiguousarray(star, dtype=np.int64).reshape(-1)
     if not len(ptr) or ptr[0] != 0 or ptr[-1] != len(star) or (np.diff(ptr) < 0).any():
         raise ValueError("star_independent: ptr must be CSR row pointers into star")
-    _check_index("order", order, len(ptr) - 1)
-    _check_index("star", star, int(ntri))
+    check_index("order", order, len(ptr) - 1)
+    check_index("star", star, int(ntri))
     return _star_independent(order, ptr, star, int(ntri), int(rounds))
 
 
@@ -3203,142 +1436,10 @@ def star_moves(rows, tris, T, P, new, nrm):
     P, new, nrm = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (P, new, nrm))
     if len(rows) != len(tris) or len(new) != len(P) or len(nrm) != len(T):
         raise ValueError("star_moves: rows/tris of one length, new one row per point, nrm one per triangle")
-    _check_index("rows", rows, len(P))
-    _check_index("tris", tris, len(T))
-    _check_index("T", T, len(P))
+    check_index("rows", rows, len(P))
+    check_index("tris", tris, len(T))
+    check_index("T", T, len(P))
     return _star_moves(rows, tris, T, P, new, nrm)
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _move_tests(cur, Fi, fn_old, area_old, moved, newtri, vtri, reg, tri_n, cosmax, cos_facing):
-    k = Fi.shape[0]
-    bad = np.empty(k, np.bool_)
-    sc = np.empty((4, k))
-    for i in range(k):
-        q0, q1, q2 = Fi[i, 0], Fi[i, 1], Fi[i, 2]
-        A, B, C = cur[q0], cur[q1], cur[q2]
-        n0, n1, n2, ar = _unit_normal_area(A, B, C)
-        b = _dot3e(n0, n1, n2, fn_old[i, 0], fn_old[i, 1], fn_old[i, 2]) <= cosmax or ar <= 1e-3 * area_old[i]
-        dmax = -2.0
-        anyreg = False
-        for v in (q0, q1, q2):
-            t = newtri[v] if moved[v] else vtri[v]
-            if reg[v] and t >= 0:
-                d = _dot3e(n0, n1, n2, tri_n[t, 0], tri_n[t, 1], tri_n[t, 2])
-                b = b or d <= 0
-                dmax = _max_nan(dmax, d)
-                anyreg = True
-        bad[i] = b or (anyreg and dmax <= cos_facing)
-        sc[0, i], sc[1, i] = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
-        sc[2, i], sc[3, i] = _sin_cos(C[0] - B[0], C[1] - B[1], C[2] - B[2], A[0] - B[0], A[1] - B[1], A[2] - B[2])
-    return bad, sc
-
-
-def move_tests(cur, Fi, fn_old, area_old, moved, newtri, vtri, reg, tri_n, cosmax, cos_facing):
-    """The remesh relaxation's tests of the faces ``Fi`` (k, 3) at the positions ``cur``, each
-    face on its own: ``bad`` where its unit normal turned from ``fn_old`` (k, 3) to a cosine of
-    ``cosmax`` or less, its area (twice, ``area_old`` the old) fell to 1e-3 of the old or less, or
-    it faces against the input at a regular corner (``reg``; input triangle ``newtri`` where
-    ``moved``, else ``vtri``, -1 none; ``tri_n`` their normals) or stands across it (no regular
-    corner's dot above ``cos_facing``); and the :func:`corner_sin_cos` arguments (4, k) of the
-    faces for numpy's ``arctan2``. The bits of the numpy formulas of ``remesh._accept_moves``."""
-    Fi = np.ascontiguousarray(Fi, dtype=np.int64).reshape(-1, 3)
-    cur, fn_old, tri_n = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (cur, fn_old, tri_n))
-    area_old = np.ascontiguousarray(area_old, dtype=np.float64).reshape(-1)
-    moved, reg = (np.ascontiguousarray(x, dtype=np.bool_).reshape(-1) for x in (moved, reg))
-    newtri, vtri = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (newtri, vtri))
-    n = len(cur)
-    if len(fn_old) != len(Fi) or len(area_old) != len(Fi) or not (len(moved) == len(reg) == len(newtri)
-                                                                    == len(vtri) == n):
-        raise ValueError("move_tests: fn_old/area_old one per face; moved, reg, newtri, vtri one per point")
-    _check_index("Fi", Fi, n)
-    if max(newtri.max(initial=-1), vtri.max(initial=-1)) >= len(tri_n):
-        raise ValueError(f"move_tests: input triangles must be below {len(tri_n)}")
-    return _move_tests(cur, Fi, fn_old, area_old, moved, newtri, vtri, reg, tri_n, float(cosmax), float(cos_facing))
-
-
-def _rows3(a):
-    """``a`` as a C-contiguous float64 (k, 3) array, or None when it is not one (other dtype or
-    shape: the caller falls back on numpy)."""
-    if not isinstance(a, np.ndarray) or a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != 3:
-        return None
-    return np.ascontiguousarray(a)
-
-
-def cross_rows(a, b):
-    """Row-wise cross product of two (k, 3) float64 arrays (``mesh.cross_rows``'s bits); None
-    for any other input (the caller uses numpy)."""
-    a3, b3 = _rows3(a), _rows3(b)
-    if a3 is None or b3 is None or a3.shape != b3.shape:
-        return None
-    return _cross_rows(a3, b3)
-
-
-def norm_rows(a):
-    """``sqrt((x*x + y*y) + z*z)`` of each row of a (k, 3) float64 array (``mesh.norm_rows``);
-    None for any other input."""
-    a3 = _rows3(a)
-    return None if a3 is None else _norm_rows(a3)
-
-
-def dot_rows(a, b):
-    """``np.einsum("ij,ij->i", a, b)`` of two (k, 3) float64 arrays, the same bits; None for
-    any other input."""
-    a3, b3 = _rows3(a), _rows3(b)
-    if a3 is None or b3 is None or a3.shape != b3.shape:
-        return None
-    return _dot_rows(a3, b3)
-
-
-def dot_norm_rows(a):
-    """``np.sqrt(np.einsum("ij,ij->i", a, a))`` of a (k, 3) float64 array; None otherwise."""
-    a3 = _rows3(a)
-    return None if a3 is None else _dot_norm_rows(a3)
-
-
-def edge_lengths(P, E):
-    """``dot_norm_rows(P[E[:, 1]] - P[E[:, 0]])`` (einsum's norm of each edge vector, the same
-    bits) without gathering the two ends' rows: ``P`` (n, 3) float64, ``E`` (k, 2) indices."""
-    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
-    E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
-    _check_index("E", E, len(P))
-    return _edge_lengths(P, E)
-
-
-def dot_unit_rows(a):
-    """Rows of a (k, 3) float64 array divided by :func:`dot_norm_rows`, zero rows where that
-    norm is not positive (``np.divide(a, n, out=zeros, where=n > 0)``); None otherwise."""
-    a3 = _rows3(a)
-    return None if a3 is None else _dot_unit_rows(a3)
-
-
-def triangle_normals(P, F):
-    """Unnormalised normals ``cross(P[F1] - P[F0], P[F2] - P[F0])`` of triangles ``F`` (k, >=3),
-    the bits of ``mesh.cross_rows`` on the gathered corners."""
-    P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
-    F = np.ascontiguousarray(np.asarray(F)[:, :3], dtype=np.int64)
-    _check_index("F", F, len(P))
-    return _tri_normals(P, F)
-
-
-def corner_sin_cos(A, B, C):
-    """For triangles with corners ``A``, ``B``, ``C`` (k, 3): a (4, k) array of ``|u x v|`` and
-    ``u . v`` at corner A (u = B - A, v = C - A) and at corner B (u = C - B, v = A - B), with
-    the bits of ``norm(cross_rows(u, v))`` and ``einsum("ij,ij->i", u, v)`` (the arguments of
-    the remesh's ``arctan2`` angles)."""
-    A, B, C = (_rows3_any(x) for x in (A, B, C))
-    if not (len(A) == len(B) == len(C)):
-        raise ValueError("corner_sin_cos takes three (k, 3) arrays of the same length")
-    return _corner_sin_cos(A, B, C)
-
-
-def _rows3_any(x):
-    """``x`` as (k, 3) float64 rows without a copy where it already is one, strided or not (the
-    corners ``Q[:, j]`` of a (k, 3, 3) array): the compiled loops read any strides."""
-    x = np.asarray(x)
-    if x.dtype != np.float64 or x.ndim != 2 or x.shape[1] != 3:
-        x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
-    return x
 
 
 def corner_cosines(X):
@@ -3349,24 +1450,6 @@ def corner_cosines(X):
     if X.ndim != 3 or X.shape[1:] != (3, 3):
         raise ValueError("corner_cosines takes a (k, 3, 3) array of triangle corners")
     return _corner_cosines(X)
-
-
-def facing_ok(F, kind, vtri, tri_n, nrm, cos_facing):
-    """Per face ``F[i]`` (k, 3) with unit normal ``nrm[i]``: True unless the face has a corner
-    v with ``kind[v] == 0`` and ``vtri[v] >= 0`` and, at every such corner, ``nrm[i] .
-    tri_n[vtri[v]]`` is not above ``cos_facing`` (a NaN there counts as not above). The bits
-    of the remesh's einsum formula."""
-    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
-    kind = np.ascontiguousarray(kind, dtype=np.int64)
-    vtri = np.ascontiguousarray(vtri, dtype=np.int64)
-    tri_n = np.ascontiguousarray(tri_n, dtype=np.float64).reshape(-1, 3)
-    nrm = np.ascontiguousarray(nrm, dtype=np.float64).reshape(-1, 3)
-    if len(nrm) != len(F) or len(vtri) != len(kind):
-        raise ValueError("facing_ok: one normal per face and one kind per vertex triangle")
-    _check_index("F", F, len(kind))
-    if len(vtri) and vtri.max(initial=-1) >= len(tri_n):
-        raise ValueError(f"facing_ok: vertex triangles must be below {len(tri_n)}")
-    return _facing_ok(F, kind, vtri, tri_n, nrm, float(cos_facing))
 
 
 # ============================================================================ curves
@@ -3388,11 +1471,11 @@ def _closest_on_curves(q, cid, start, stop, a, ab, L):
                 r = best + L[s]
                 if f0 * f0 + f1 * f1 + f2 * f2 > r * r * (1.0 + 1e-9) + 1e-300:
                     continue
-            t = _dot3(f0, f1, f2, ab[s, 0], ab[s, 1], ab[s, 2])
-            t = _clip01(t / (L[s] * L[s]))
+            t = dot3(f0, f1, f2, ab[s, 0], ab[s, 1], ab[s, 2])
+            t = clip01(t / (L[s] * L[s]))
             x0, x1, x2 = a[s, 0] + t * ab[s, 0], a[s, 1] + t * ab[s, 1], a[s, 2] + t * ab[s, 2]
             e0, e1, e2 = x0 - q0, x1 - q1, x2 - q2
-            d = np.sqrt(_dot3(e0, e1, e2, e0, e1, e2))
+            d = np.sqrt(dot3(e0, e1, e2, e0, e1, e2))
             # nearest, then the lowest segment; a NaN distance (a zero-length segment) only
             # when nothing else is there, as lexsort puts NaN last
             if bs < 0 or d < best or (best != best and d == d):
@@ -3422,7 +1505,7 @@ def closest_on_curves(q, cid, start, stop, a, ab, L):
     L = np.ascontiguousarray(L, dtype=np.float64).reshape(-1)
     if len(cid) != len(q) or len(stop) != len(start) or len(ab) != len(a) or len(L) != len(a):
         raise ValueError("closest_on_curves: q/cid, start/stop and a/ab/L must have matching lengths")
-    _check_index("cid", cid, len(start))
+    check_index("cid", cid, len(start))
     if len(start) and ((start < 0).any() or (stop > len(a)).any() or (stop <= start).any()):
         raise ValueError(f"every curve needs a non-empty segment range within 0..{len(a)}")
     return _closest_on_curves(q, cid, start, stop, a, ab, L)
@@ -3433,6 +1516,11 @@ def warm_up() -> float:
     seconds it took (about 45 s on a new install, 0.3 s once cached). Run by ``make install``
     and by the benchmark before its clock starts."""
     import time
+
+    from .project.kernels import closest_on_triangles, TriangleBVH
+    from .remesh.kernels import (greedy_independent_rings, common_neighbour_counts, group_order, edge_neighbours,
+                                 rank_desc, collapse_directions, collapse_apply, collapse_select, flip_candidates,
+                                 move_tests, edge_lengths, triangle_normals, corner_sin_cos, facing_ok)
     t0 = time.perf_counter()
     greedy_independent(np.array([0, 1, 1]), np.array([0, 0, 1]), np.array([1, 2]), 2,
                        check=lambda w: np.ones(len(w), bool), max_sub=3)
@@ -3469,7 +1557,7 @@ def warm_up() -> float:
     TriangleBVH(np.eye(3), np.array([[0, 1, 2]])).closest(np.ones((1, 3)))
     nearest_other_distance(np.eye(3), np.array([0, 2]), 0.5)
     star_independent(np.array([0, 1]), np.array([0, 1, 2]), np.array([0, 0]), 1)
-    _in_range(np.zeros(1, np.int64), 1)
+    in_range(np.zeros(1, np.int64), 1)
     safe_matching_rounds([0], [1], [-1.0], 2)
     closest_on_curves(np.zeros((1, 3)), [0], [0], [1], np.zeros((1, 3)), np.ones((1, 3)), [np.sqrt(3.0)])
     e = np.eye(3)

@@ -4,9 +4,9 @@ import pytest
 
 from scipy import sparse
 
-from shellmesh_mdao.kernels import (ReducedHessian, closest_on_curves, common_neighbour_counts, greedy_independent,
-                                    greedy_independent_rings, min_corner_sj, ortho_gradient, ortho_jacobian,
-                                    stable_order, stable_pair_order)
+from shellmesh_mdao.core.kernels import greedy_independent, stable_order, stable_pair_order
+from shellmesh_mdao.kernels import ReducedHessian, closest_on_curves, min_corner_sj, ortho_gradient, ortho_jacobian
+from shellmesh_mdao.remesh.kernels import common_neighbour_counts, greedy_independent_rings
 from shellmesh_mdao.mesh import cross_rows
 
 
@@ -434,7 +434,7 @@ def test_counting_sorts_give_numpy_stable_argsort(seed):
     assert np.array_equal(stable_order([2, 0, 2, 1, 0], 3), [1, 4, 3, 0, 2])
     # grouping with row pointers, and vertex neighbours along edges: the numpy constructions
     # the remesh used before them
-    from shellmesh_mdao.kernels import edge_neighbours, group_order
+    from shellmesh_mdao.remesh.kernels import edge_neighbours, group_order
     ptr, order = group_order(k, n)
     assert np.array_equal(order, np.argsort(k, kind="stable"))
     assert np.array_equal(ptr, np.concatenate([[0], np.cumsum(np.bincount(k, minlength=n))]))
@@ -445,7 +445,7 @@ def test_counting_sorts_give_numpy_stable_argsort(seed):
     assert np.array_equal(nbr, dst[np.argsort(src, kind="stable")])
     assert np.array_equal(vptr, np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))]))
     # the edge table's row pointers against the numpy counts they replaced
-    from shellmesh_mdao.kernels import edge_rows
+    from shellmesh_mdao.core.kernels import edge_rows
     Es = E[np.lexsort((E[:, 1], E[:, 0]))]
     assert np.array_equal(edge_rows(Es, n), np.concatenate([[0], np.cumsum(np.bincount(Es[:, 0], minlength=n))]))
     with pytest.raises(ValueError, match="E holds indices outside"):
@@ -466,7 +466,7 @@ def test_rank_desc_gives_the_lexsort_ranks(kind):
     """Radix ranks against np.lexsort((tie, -prio)): normal floats, few distinct values (ties
     broken by the key), infinities and both zeros, subnormals, exponents across the whole
     range; the remesh's hashed ids and full 64-bit keys."""
-    from shellmesh_mdao.kernels import rank_desc
+    from shellmesh_mdao.remesh.kernels import rank_desc
     from shellmesh_mdao.remesh.common import _hash
     rng = np.random.default_rng(900 + kind)
     for _ in range(40):
@@ -562,7 +562,7 @@ def test_closest_on_triangles_matches_the_numpy_regions():
     # (collinear, a repeated corner, all three corners equal): the same bits wherever the
     # numpy version gave a point; where it gave NaN (a zero-length edge, 0 / 0 in its region)
     # the kernel gives the closest point of the triangle's other edges
-    from shellmesh_mdao.kernels import closest_on_triangles
+    from shellmesh_mdao.project.kernels import closest_on_triangles
     rng = np.random.default_rng(600)
     k = 20000
     a, b, c = rng.normal(size=(3, k, 3))
@@ -656,7 +656,8 @@ def _same(x, y):
 
 @pytest.mark.parametrize("k", [0, 1, 7, 8, 9, 31, 1000, 4099])
 def test_row_kernels_give_numpy_bits(k):
-    from shellmesh_mdao import kernels as K
+    from shellmesh_mdao.core import kernels as K
+    from shellmesh_mdao.remesh.kernels import edge_lengths
 
     rng = np.random.default_rng(k)
     a, b = _rows(rng, k), _rows(rng, k)
@@ -678,12 +679,12 @@ def test_row_kernels_give_numpy_bits(k):
         P = np.vstack([a, b])
         E = np.column_stack([rng.integers(0, max(len(P), 1), (k, 2)), np.zeros(k, np.int64)])[:, :2] \
             if len(P) else np.zeros((0, 2), np.int64)
-        _same(K.edge_lengths(P, E), np.sqrt(np.einsum("ij,ij->i", P[E[:, 1]] - P[E[:, 0]], P[E[:, 1]] - P[E[:, 0]])))
+        _same(edge_lengths(P, E), np.sqrt(np.einsum("ij,ij->i", P[E[:, 1]] - P[E[:, 0]], P[E[:, 1]] - P[E[:, 0]])))
     assert K.dot_rows(a[:20].clip(-1, 1).astype(np.float32), b[:20]) is None
     assert K.cross_rows(a[:, :2], b[:, :2]) is None
     assert K.norm_rows(a[None]) is None
     with pytest.raises(ValueError):
-        K.edge_lengths(a, [[0, len(a)]])
+        edge_lengths(a, [[0, len(a)]])
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -755,7 +756,7 @@ def test_triangle_angle_kernels_give_the_numpy_angles(k):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_facing_ok_matches_the_einsum_test(seed):
-    from shellmesh_mdao import kernels as K
+    from shellmesh_mdao.remesh import kernels as K
 
     rng = np.random.default_rng(seed)
     n, m, k = 60, 40, 300
@@ -866,7 +867,7 @@ def test_collapse_select_matches_the_numpy_formulas(seed):
     the numpy formulas of the tests (numpy's arctan2 for the angles), both directions of every
     winner, the smaller longest-new-edge ratio first. On a wavy, jittered grid with a NaN size,
     a node on top of its neighbour and faces standing across the input."""
-    from shellmesh_mdao.kernels import collapse_select, greedy_independent_rings
+    from shellmesh_mdao.remesh.kernels import collapse_select, greedy_independent_rings
     from shellmesh_mdao.mesh import dot_unit_rows as _unit
     from shellmesh_mdao.remesh.common import tri_normals as _tri_normals
 
@@ -925,7 +926,7 @@ def test_collapse_select_facing_only_matches_the_numpy_formulas(seed):
     facing tests (no new face standing across the input, nor facing against the input triangle
     closest to its centroid, found by SurfaceLocator.closest), u into v first, else v into u.
     On a wavy, jittered grid whose input is a tilted, partly flipped copy of itself."""
-    from shellmesh_mdao.kernels import collapse_select, facing_ok, greedy_independent_rings
+    from shellmesh_mdao.remesh.kernels import collapse_select, facing_ok, greedy_independent_rings
     from shellmesh_mdao.mesh import cross_rows
     from shellmesh_mdao.project import SurfaceLocator
     from shellmesh_mdao.mesh import dot_norm_rows as _norm, dot_unit_rows as _unit
@@ -996,7 +997,7 @@ def test_flip_candidates_match_the_numpy_formulas(seed):
     gain, the dihedrals of the old and new pairs, facing), on a wavy, jittered grid with a
     tetrahedron beside it (whose flips would create existing edges), a node on top of its
     neighbour, feature edges, two patches and faces standing across."""
-    from shellmesh_mdao.kernels import flip_candidates
+    from shellmesh_mdao.remesh.kernels import flip_candidates
     from shellmesh_mdao.mesh import dot_unit_rows as _unit
     from shellmesh_mdao.remesh.common import EdgeTable, min_angle_of as _min_angle_of
 
@@ -1068,7 +1069,8 @@ def test_skin_flips_match_the_numpy_formulas(seed):
     keys, locked edges, active vertices, dihedral, existing new edge, the new pair against the
     mean normal), on a wavy, jittered grid with a tetrahedron beside it (whose flips would
     create existing edges), a folded corner and a node on top of its neighbour."""
-    from shellmesh_mdao.kernels import corner_cosines, edge_table, skin_flips
+    from shellmesh_mdao.core.kernels import edge_table
+    from shellmesh_mdao.kernels import corner_cosines, skin_flips
     from shellmesh_mdao.mesh import cross_rows, norm_rows
 
     rng = np.random.default_rng(seed)
@@ -1120,7 +1122,7 @@ def test_skin_flips_match_the_numpy_formulas(seed):
     # the kernel
     _, H0, H1, CNT, E, _ = edge_table(T, n)
     kptr = np.concatenate([[0], np.cumsum(np.bincount(E[:, 0], minlength=n))])
-    from shellmesh_mdao.kernels import edge_lookup
+    from shellmesh_mdao.core.kernels import edge_lookup
     locked = np.zeros(len(E), bool)
     locked[edge_lookup(E, kptr, locked_pairs[:, 0], locked_pairs[:, 1])] = True
     got_pqrs, got_ff, got_orient, got_cos = skin_flips(E, kptr, H0, H1, CNT, locked, T, P, cmax, active)
@@ -1180,7 +1182,7 @@ def test_move_tests_match_the_numpy_formulas(seed):
     facing against or standing across the input at regular corners) and angle arguments of the
     numpy formulas it replaced, on a wavy grid whose vertices move by up to two cells, one onto
     its neighbour, with NaN input normals and faces of the input turned over."""
-    from shellmesh_mdao.kernels import move_tests
+    from shellmesh_mdao.remesh.kernels import move_tests
     from shellmesh_mdao.mesh import dot_norm_rows as _norm, dot_unit_rows as _unit
     from shellmesh_mdao.remesh.common import min_angle_of as _min_angle_of, tri_min_angle as _tri_min_angle
     from shellmesh_mdao.remesh.common import tri_normals as _tri_normals
@@ -1231,7 +1233,7 @@ def test_move_tests_match_the_numpy_formulas(seed):
 def test_edge_table_matches_the_sorted_key_runs(seed):
     """kernels.edge_table gives remesh.common.EdgeTable's arrays of the whole-array construction: a stable
     sort of the half-edge keys and its runs (boundary, interior and, allowed, non-manifold edges)."""
-    from shellmesh_mdao.kernels import edge_table
+    from shellmesh_mdao.core.kernels import edge_table
 
     rng = np.random.default_rng(seed)
     n = 60
@@ -1264,7 +1266,7 @@ def test_edge_table_matches_the_sorted_key_runs(seed):
 def test_edge_lookup_matches_the_sorted_keys(seed):
     """edge_lookup (a scan of the few edges of each lower end) gives the edge ids the sorted
     key search gave, -1 for absent pairs, in either order of the ends."""
-    from shellmesh_mdao.kernels import edge_lookup, edge_table
+    from shellmesh_mdao.core.kernels import edge_lookup, edge_table
     rng = np.random.default_rng(30 + seed)
     n = 200
     F = np.array([rng.choice(n, 3, replace=False) for _ in range(300)])
@@ -1335,7 +1337,7 @@ def test_index_checks_match_numpys_min_and_max():
     """The kernels' index check (a compiled pass for int64 arrays, numpy's min and max for the
     others) accepts exactly the arrays whose entries are all in [0, n), 2-D, non-contiguous
     and int32 ones included, and names the range it found."""
-    from shellmesh_mdao.kernels import _check_index
+    from shellmesh_mdao.core.kernels import check_index as _check_index
     rng = np.random.default_rng(4)
     for _ in range(200):
         n = int(rng.integers(1, 50))
@@ -1352,7 +1354,7 @@ def test_index_checks_match_numpys_min_and_max():
 
 def _collapse_directions_numpy(E, cand, h0all, h1all, valence, F, nptr, nbr, kind, isf, chain_ok, remove_first):
     """remesh.operations.collapse_edges' numpy cheap tests before kernels.collapse_directions."""
-    from shellmesh_mdao.kernels import common_neighbour_counts
+    from shellmesh_mdao.remesh.kernels import common_neighbour_counts
     n = len(nptr) - 1
     deg = np.diff(nptr)
     h0, h1 = h0all[cand], h1all[cand]
@@ -1385,7 +1387,8 @@ def test_collapse_directions_give_the_numpy_masks(seed):
     chain counts and vertices to remove first."""
     from scipy.spatial import Delaunay
 
-    from shellmesh_mdao.kernels import collapse_directions, edge_neighbours, edge_table
+    from shellmesh_mdao.core.kernels import edge_table
+    from shellmesh_mdao.remesh.kernels import collapse_directions, edge_neighbours
     rng = np.random.default_rng(70 + seed)
     n = int(rng.integers(20, 300))
     F = Delaunay(rng.random((n, 2))).simplices.astype(np.int64)
@@ -1408,7 +1411,8 @@ def test_element_normals_and_faces_at_match_numpy(seed):
     numpy code they replaced: the corners gathered with the padding replaced by corner 0,
     ``cross_rows`` (quad diagonals, triangle sides) over ``dot_unit_rows``, degenerate
     elements zero; the faces at a set of vertices from a mask."""
-    from shellmesh_mdao.kernels import element_normals, faces_at
+    from shellmesh_mdao.core.kernels import faces_at
+    from shellmesh_mdao.kernels import element_normals
     from shellmesh_mdao.mesh import vertex_faces
     from shellmesh_mdao.smooth import _corner_normals
     rng = np.random.default_rng(80 + seed)

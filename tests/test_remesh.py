@@ -37,7 +37,7 @@ def _best_equidistant_dot(P, T, nin, x, n, diag):
     """Largest dot product of ``n`` with the normals of the input triangles nearest to ``x``
     (all of them within 1e-12 of the model size of the least distance: the sheets of a
     zero-thickness part are equally near)."""
-    from shellmesh_mdao.kernels import closest_on_triangles
+    from shellmesh_mdao.project.kernels import closest_on_triangles
     A, B, C = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
     d = np.linalg.norm(closest_on_triangles(np.broadcast_to(x, A.shape), A, B, C) - x, axis=1)
     return float((nin[d <= d.min() + 1e-12 * diag] @ n).max())
@@ -391,7 +391,8 @@ def test_collapse_apply_gives_the_numpy_update(seed):
     removed vertices."""
     from scipy.spatial import Delaunay
 
-    from shellmesh_mdao.kernels import collapse_apply, edge_neighbours, edge_table
+    from shellmesh_mdao.core.kernels import edge_table
+    from shellmesh_mdao.remesh.kernels import collapse_apply, edge_neighbours
     from shellmesh_mdao.remesh.work import WorkMesh
     rng = np.random.default_rng(60 + seed)
     n = int(rng.integers(30, 300))

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import faces_at
+from .kernels import faces_at
 
 __all__ = ["faces_of", "face_rings"]
 

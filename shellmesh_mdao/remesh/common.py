@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MeshValidationError
-from ..kernels import (corner_sin_cos, edge_lookup, edge_neighbours, edge_rows, edge_table, rank_desc, triangle_normals,
-                       vertex_faces)
+from ..core.kernels import edge_lookup, edge_rows, edge_table, vertex_faces
+from .kernels import corner_sin_cos, edge_neighbours, rank_desc, triangle_normals
 
 __all__ = ["SPLIT_RATIO", "COLLAPSE_RATIO", "REGULAR", "CHAIN", "CORNER", "COS_FACING", "COS_TURNED", "tri_normals",
            "tri_min_angle", "min_angle_of", "tri_angles", "csr_entries", "rank_candidates", "EdgeTable"]

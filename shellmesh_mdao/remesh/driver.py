@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from ..errors import MeshValidationError, SizeError
-from ..kernels import edge_lengths, group_order
+from .kernels import edge_lengths, group_order
 from ..mesh import ShellMesh, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from ..project import SurfaceLocator
 from .common import CORNER, REGULAR, SPLIT_RATIO, tri_angles

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import (collapse_apply, collapse_directions, collapse_select, edge_lengths, facing_ok, flip_candidates,
-                       greedy_independent, greedy_independent_rings)
+from ..core.kernels import greedy_independent
+from .kernels import (collapse_apply, collapse_directions, collapse_select, edge_lengths, facing_ok, flip_candidates,
+                      greedy_independent_rings)
 from ..mesh import cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
 from .common import (CHAIN, COLLAPSE_RATIO, CORNER, COS_FACING, COS_TURNED, REGULAR, SPLIT_RATIO, csr_entries,
                      min_angle_of, rank_candidates, tri_angles, tri_min_angle, tri_normals)

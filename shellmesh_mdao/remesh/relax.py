@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import group_order, move_tests
+from .kernels import group_order, move_tests
 from ..mesh import dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from .common import CHAIN, COS_FACING, REGULAR, min_angle_of, tri_min_angle, tri_normals
 

@@ -10,7 +10,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from ..errors import MeshValidationError
-from ..kernels import edge_lengths, group_order
+from .kernels import edge_lengths, group_order
 from ..mesh import ShellMesh, bbox_diagonal, dot_norm_rows, dot_rows, dot_unit_rows
 from ..project import SurfaceLocator, closest_point_on_triangles
 from .common import CHAIN, CORNER, EdgeTable, tri_normals
