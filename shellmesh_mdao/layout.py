@@ -35,9 +35,10 @@ from pathlib import Path
 import numpy as np
 
 from .errors import LayoutError, SizeError
+from .mesh import norm_rows
 
 __all__ = ["Layout", "WingLayout", "ExplicitMember", "MemberSpec", "load_layout", "layout_from_manifest",
-           "MIN_UP_SPAN_ANGLE_DEG"]
+           "explicit_plane", "MIN_UP_SPAN_ANGLE_DEG"]
 
 #: ``up`` must make at least this angle with the span line (else the rib normal is undefined).
 MIN_UP_SPAN_ANGLE_DEG = 10.0
@@ -267,6 +268,33 @@ class MemberSpec:
             pts = w.chord_point(eta, np.full(n, self.parameter))
         pts[0], pts[-1] = self.start, self.end
         return pts
+
+
+def explicit_plane(spec, tol: float = 1e-9):
+    """The plane of a planar explicit member from its layout: ``(point, unit normal)`` when its
+    ``upper`` and ``lower`` polylines and both projection directions lie in one plane (within
+    ``tol`` times the polylines' extent), else ``(None, None)`` (a kinked or twisted member, or
+    closest-point projection, whose projection directions are not known before projecting)."""
+    d_up = getattr(spec, "direction", None)
+    if d_up is None:
+        return None, None
+    up_pts = np.asarray(spec.upper, float).reshape(-1, 3)
+    lo_pts = np.asarray(spec.lower, float).reshape(-1, 3)
+    d_lo = getattr(spec, "lower_direction", None)
+    dirs = np.asarray([d_up] + ([] if d_lo is None else [d_lo]), float)
+    dirs = dirs / norm_rows(dirs, axis=1, keepdims=True)
+    pts = np.vstack([up_pts, lo_pts])
+    ext = float(norm_rows(np.ptp(pts, axis=0)))
+    seg = np.diff(up_pts, axis=0)
+    k = int(np.argmax(norm_rows(seg, axis=1)))
+    n = np.cross(seg[k], dirs[0])
+    ln = float(np.linalg.norm(n))
+    if ext == 0 or ln <= 1e-12 * float(np.linalg.norm(seg[k])):
+        return None, None
+    n = n / ln
+    if np.abs((pts - up_pts[0]) @ n).max() > tol * ext or np.abs(dirs @ n).max() > tol:
+        return None, None
+    return up_pts[0].copy(), n
 
 
 @dataclass(frozen=True)

@@ -386,7 +386,7 @@ def stage_remesh(state: PipelineState) -> PipelineState:
 
 def stage_imprint(state: PipelineState) -> PipelineState:
     """Imprint every member's curves into the skin as chains of edges; name the skin bays."""
-    from .imprint import (coarsen_chains, imprint_chains, refine_chains, skin_families,
+    from .imprint import (chain_report, coarsen_chains, imprint_chains, refine_chains, skin_families,
                           split_member_bridges)
 
     _need(state, "imprint")
@@ -399,12 +399,7 @@ def stage_imprint(state: PipelineState) -> PipelineState:
     mesh = split_member_bridges(mesh, chains, state.locator)
     mesh = skin_families(mesh, state.layout)
     st = state.but(mesh=mesh, chains=chains, stage="imprint")
-    members: dict = {}
-    for c in chains:
-        e = members.setdefault(c.member, {"chains": []})
-        e["chains"].append({"side": c.side, "n_vertices": int(c.n_vertices), "snap": float(c.snap),
-                            "length": float(norm_rows(np.diff(mesh.points[c.vertices], axis=0), axis=1).sum())})
-    st.report["members"] = members
+    st.report["members"] = chain_report(mesh, chains)
     return st
 
 

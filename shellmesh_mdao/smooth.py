@@ -524,7 +524,7 @@ def derive_supports(mesh: ShellMesh, skin=None, planes: dict | None = None, curv
     skin : SurfaceLocator (or ShellMesh / (points, triangles)) of the ORIGINAL input skin;
         the faces of every component not in ``planes`` lie on it. May be None when every
         component is a planar member.
-    planes : dict component id -> plane (a :class:`~shellmesh_mdao.section.Plane` or a
+    planes : dict component id -> plane (a :class:`~shellmesh_mdao.imprint.section.Plane` or a
         ``(point, normal)`` pair) for the planar members.
     curves : dict feature-edge id -> polyline (k, 3) or list of polylines (a polyline whose
         last point equals its first is closed; a ``(points, closed)`` tuple also works).
@@ -1563,7 +1563,7 @@ def section_polylines(skin, point, normal) -> list:
     arrays). Computed once per locator and plane: the split, merge and quad stages ask for the
     same members' sections (the input skin never changes during a run). At most
     :data:`SECTION_CACHE_SIZE` planes are kept per locator (least recently used dropped)."""
-    from .section import Plane, plane_section
+    from .imprint.section import Plane, plane_section
 
     memo = _SECTIONS.setdefault(skin, {})
     key = (np.asarray(point, np.float64).tobytes(), np.asarray(normal, np.float64).tobytes())

@@ -17,10 +17,11 @@ import pytest
 from shellmesh_mdao.errors import LayoutError, ProjectionError, ShellMeshError
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.layout import load_layout
-from shellmesh_mdao.members import STRIP_MIN_ANGLE, _tri_min_angles
+from shellmesh_mdao.members import STRIP_MIN_ANGLE
+from shellmesh_mdao.members.meshing import tri_min_angles
 from shellmesh_mdao.pipeline import run_pipeline
 from shellmesh_mdao.project import SurfaceLocator
-from shellmesh_mdao.section import Plane, section_arc
+from shellmesh_mdao.imprint.section import Plane, section_arc
 
 # smallest member triangle angle: 20 deg where refined, STRIP_MIN_ANGLE in one-element-high strips
 MIN_ANGLE = min(20.0, STRIP_MIN_ANGLE)
@@ -141,7 +142,7 @@ def check_skin_and_members(r, names):
     for e in topo.edges[junction].tolist():
         assert tuple(e) in owner and owner[tuple(e)] >= 0, f"skin-member edge {e} is not a chain edge"
     # member triangle angles
-    ang = _tri_min_angles(mesh.points, mesh.faces[mem, :3])
+    ang = tri_min_angles(mesh.points, mesh.faces[mem, :3])
     assert ang.min() >= MIN_ANGLE, f"member triangle with angle {ang.min():.2f} deg"
     # the skin stays closed and every skin node (chain vertices included) lies on the input surface
     skin = mesh.submesh(~mem)
@@ -304,7 +305,7 @@ def test_wing_chains_keep_their_spacing(snap):
     mesh = r.mesh
     mem = face_mask(mesh, [m.name for m in r.layout.members()])
     assert mem.any()
-    assert _tri_min_angles(mesh.points, mesh.faces[mem, :3]).min() >= MIN_ANGLE
+    assert tri_min_angles(mesh.points, mesh.faces[mem, :3]).min() >= MIN_ANGLE
 
 
 # ============================================================================ errors

@@ -24,7 +24,7 @@ from shellmesh_mdao import pipeline as pl
 from shellmesh_mdao.errors import ProjectionError
 from shellmesh_mdao.imprint import chain_specs, imprint_chains
 from shellmesh_mdao.layout import layout_from_manifest
-from shellmesh_mdao.members import _split_thin_chain_edges
+from shellmesh_mdao.members.spacing import split_thin_chain_edges
 from shellmesh_mdao.project import project_layout, project_wing_stations
 from shellmesh_mdao.quality import element_quality
 
@@ -106,10 +106,10 @@ def test_split_thin_limits_fans():
     of under 1 degree); with a 53-degree apex on both sides it is split into 3 pieces, every
     fan triangle keeping 15 degrees."""
     P, F, C, FE, FID, m = _fan_case()
-    P2, F2, *_ = _split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1)
+    P2, F2, *_ = split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1)
     assert len(P2) == len(P) and np.array_equal(F2, F)
     P[3] = [0.5, -1.0, 0]                                   # apex angles ~53 degrees on both sides
-    P3, F3, *_ = _split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1)
+    P3, F3, *_ = split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1)
     k = len(F3) // 2
     assert k == 3                                           # floor(53.1 / 15)
     ang = element_quality(P3, F3)["min_angle"]
@@ -136,7 +136,7 @@ def test_split_thin_keeps_fans_at_a_fixed_apex_open():
     def split(fixed):                                       # one round: the first split only
         m = SimpleNamespace(sides=[np.array([0, 1]), np.array([4, 5, 6, 7])],
                             side_arcs=[np.array([[0.0, 0, 0], [1.0, 0, 0]]), None], name="m")
-        P2, F2, *_ = _split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1, rounds=1, fixed=fixed)
+        P2, F2, *_ = split_thin_chain_edges(P.copy(), F.copy(), C, FE, FID, [m], size=0.1, rounds=1, fixed=fixed)
         return P2[len(P):], P2, F2
 
     free = np.zeros(len(P), bool)
@@ -200,14 +200,14 @@ def test_cessna_one_spar_trailing_edge_members(geometry_dir, manifest):
     fix, d5b79c3, moved the chain vertices: one rib triangle is now 11.4 degrees, in a trapezoid
     of the wedge 0.2 to 0.08 tall and 0.41 long whose long lower side cannot be fanned, the skin
     angle opposite it being 20 degrees.)"""
-    from shellmesh_mdao.members import _tri_min_angles
+    from shellmesh_mdao.members.meshing import tri_min_angles
     c = SL.draw_case(89, "cessna210", manifest=manifest)
     lay = layout_from_manifest(manifest, "cessna210", ribs=list(c["ribs"]), spars=list(c["spars"]))
     res = pl.run_pipeline(geometry_dir / manifest["geometries"]["cessna210"]["file"], lay, c["size"],
                           until="members", progress=False)
     m = res.mesh
     m.validate()
-    ang = _tri_min_angles(m.points, m.faces[:, :3])
+    ang = tri_min_angles(m.points, m.faces[:, :3])
     skin = np.array(["skin" in m.component_names[i] for i in m.component])
     assert ang[~skin].min() >= 10.0
     assert ang[skin].min() >= 9.99

@@ -5,7 +5,7 @@ import trimesh
 
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.imprint import ChainSpec, closest_on_polyline, imprint_chains
-from shellmesh_mdao.section import Plane
+from shellmesh_mdao.imprint.section import Plane
 
 
 def wing_chains(mesh, lay, etas, spars):
@@ -173,7 +173,7 @@ def test_cut_chain_snaps_near_vertices_but_never_a_whole_triangle():
     flat skin snapped; and on a coarse skin a spar's chain broke into pieces at such a triangle,
     stress seeds 5, 32 and 35 at a remesh factor of 2.1.)"""
     from shellmesh_mdao.imprint import cut_chain
-    from shellmesh_mdao.section import section_arc
+    from shellmesh_mdao.imprint.section import section_arc
 
     P, T = _snap_fixture()
     M1, M2, Q = 5, 6, 12
@@ -375,7 +375,7 @@ def test_chain_depths_are_the_distance_to_the_members_other_arc():
     middle) has the median distance of its points to the lower arc as depth; a chain alone on
     its member, or without an arc, has none (inf)."""
     from shellmesh_mdao.imprint import ChainResult, chain_depths
-    from shellmesh_mdao.section import SectionArc
+    from shellmesh_mdao.imprint.section import SectionArc
 
     x = np.linspace(0, 1, 11)
     up = np.stack([x, np.zeros(11), 0.3 + 0.05 * (np.abs(x - 0.5) < 0.15)], 1)
@@ -456,8 +456,9 @@ def test_bridge_across_a_nose_is_flipped_not_split():
     leave slivers (cessna210 stress seed 41: 0.14 and 0.67 degrees); split_member_bridges flips
     it to w-x instead: no new vertex, no bridge left, both triangles facing outwards, every
     angle above 5 degrees."""
-    from shellmesh_mdao.imprint import (ChainResult, _split_at_surface_midpoints, _tri_angles_min,
-                                        split_member_bridges)
+    from shellmesh_mdao.imprint import ChainResult, split_member_bridges
+    from shellmesh_mdao.imprint.common import tri_angles_min
+    from shellmesh_mdao.imprint.cut import split_at_surface_midpoints
     from shellmesh_mdao.mesh import ShellMesh
     from shellmesh_mdao.project import SurfaceLocator
 
@@ -475,13 +476,13 @@ def test_bridge_across_a_nose_is_flipped_not_split():
     mesh = ShellMesh(P, T, np.zeros(2, np.int32), ["skin", "wing/spar_0"], np.array([0, 1]))
     chains = [ChainResult("wing/spar_0", "lower", np.array([0])),
               ChainResult("wing/spar_0", "upper", np.array([1]))]
-    P2, T2, _, _ = _split_at_surface_midpoints(P, T, np.zeros(2, np.int32), np.array([[0, 1]]), loc)
-    assert _tri_angles_min(P2, T2).min() < 5.0                     # what the split alone would leave
+    P2, T2, _, _ = split_at_surface_midpoints(P, T, np.zeros(2, np.int32), np.array([[0, 1]]), loc)
+    assert tri_angles_min(P2, T2).min() < 5.0                     # what the split alone would leave
     out = split_member_bridges(mesh, chains, loc)
     assert out.n_points == 4
     edges = {tuple(e) for e in out.topology().edges.tolist()}
     assert (0, 1) not in edges and (2, 3) in edges
-    assert _tri_angles_min(out.points, out.faces).min() > 5.0
+    assert tri_angles_min(out.points, out.faces).min() > 5.0
     n = np.cross(out.points[out.faces[:, 1]] - out.points[out.faces[:, 0]],
                  out.points[out.faces[:, 2]] - out.points[out.faces[:, 0]])
     assert (n[:, 2] > 0).all() and out.check().ok
@@ -492,7 +493,7 @@ def test_closest_on_arcs_matches_one_arc_at_a_time():
     # points, bit for bit, as projecting arc by arc (the meshes depend on it)
     from types import SimpleNamespace
 
-    from shellmesh_mdao.imprint import _closest_on_arcs
+    from shellmesh_mdao.imprint.improve import _closest_on_arcs
 
     rng = np.random.default_rng(5)
     arcs = []
@@ -523,7 +524,8 @@ def test_segment_scan_and_kd_tree_give_the_same_closest_points(seed, monkeypatch
     of segment midpoints (large inputs) give the same points, segments and parameters bit for
     bit, on arcs with zero-length segments, repeated points and queries equally near two
     segments (the lowest wins)."""
-    from shellmesh_mdao import imprint as imp
+    from shellmesh_mdao.core import polyline
+    from shellmesh_mdao.imprint import improve
     rng = np.random.default_rng(500 + seed)
 
     class Arc:
@@ -541,11 +543,12 @@ def test_segment_scan_and_kd_tree_give_the_same_closest_points(seed, monkeypatch
     cid[:3] = len(arcs) - 1
     q = np.vstack([a.points.mean(0) for a in arcs])[cid] + rng.normal(size=(400, 3)) * 3
     q[:3] = [[0.0, 0.5, 0], [-1.0, 0.5, 0], [0.0, 0.5, 0.3]]
-    got = [imp._closest_on_arcs(q, cid, arcs, params=True)]
-    got += [imp._closest_on_segments(q, arcs[0].points[:-1], arcs[0].points[1:], full=True)]
-    monkeypatch.setattr(imp, "SCAN_WORK", 0)
-    ref = [imp._closest_on_arcs(q, cid, arcs, params=True)]
-    ref += [imp._closest_on_segments(q, arcs[0].points[:-1], arcs[0].points[1:], full=True)]
+    got = [improve._closest_on_arcs(q, cid, arcs, params=True)]
+    got += [polyline.closest_on_segments(q, arcs[0].points[:-1], arcs[0].points[1:], full=True)]
+    monkeypatch.setattr(improve, "SCAN_WORK", 0)            # patched where each function looks it up
+    monkeypatch.setattr(polyline, "SCAN_WORK", 0)
+    ref = [improve._closest_on_arcs(q, cid, arcs, params=True)]
+    ref += [polyline.closest_on_segments(q, arcs[0].points[:-1], arcs[0].points[1:], full=True)]
     for g, r in zip(got, ref):
         for x, y in zip(g, r):
             assert x.tobytes() == y.tobytes()
@@ -559,7 +562,7 @@ def test_segment_hits_scan_and_kd_tree_agree(seed, monkeypatch):
     """Every (point, segment) pair within eps: the compiled scan of all pairs and the KD-tree of
     segment midpoints list the same pairs, in the same order, with the same parameters bit for
     bit (points on segment ends, on zero-length segments and just outside eps among them)."""
-    from shellmesh_mdao import imprint as imp
+    from shellmesh_mdao.imprint import crossings
     rng = np.random.default_rng(80 + seed)
     a = rng.normal(size=(120, 3))
     b = a + rng.normal(size=(120, 3)) * 0.3
@@ -573,9 +576,9 @@ def test_segment_hits_scan_and_kd_tree_agree(seed, monkeypatch):
     b[-20:-10] = a[-20:-10] + [0.0, 0.25, 0.0]
     f = np.array([1.0, 1 - 1e-15, 1 + 1e-15, 1 - 1e-9, 1 + 1e-9, 1.0, 1.0, 1.0, 1 - 1e-12, 1 + 1e-12])
     q[-20:-10] = a[-20:-10] + np.array([[0.0, 0.1, 0.0]]) + f[:, None] * [eps, 0, 0]
-    got = imp._segment_hits(q, a, b, eps)
-    monkeypatch.setattr(imp, "SCAN_WORK", 0)
-    ref = imp._segment_hits(q, a, b, eps)
+    got = crossings._segment_hits(q, a, b, eps)
+    monkeypatch.setattr(crossings, "SCAN_WORK", 0)
+    ref = crossings._segment_hits(q, a, b, eps)
     assert len(got[0]) > 90
     for x, y in zip(got, ref):
         assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
@@ -585,7 +588,7 @@ def test_smooth_round_hint_gives_the_same_moves_and_records_the_triangles():
     """improve_skin's smoothing rounds pass each vertex's input triangle from the last round as a
     hint to the projections: the same moves as without one, and the hint then holds the
     triangle each projected vertex landed on."""
-    from shellmesh_mdao.imprint import _smooth_round
+    from shellmesh_mdao.imprint.improve import _smooth_round
     from shellmesh_mdao.project import SurfaceLocator
 
     m = naca_wing(n_chord=30, n_span=25)

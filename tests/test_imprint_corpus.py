@@ -21,13 +21,12 @@ import copy
 import numpy as np
 import pytest
 
-from shellmesh_mdao.imprint import (SNAP_FALLBACK, ChainSpec, _tri_angles_min, closest_on_polyline, improve_skin,
-                                   imprint_chains)
+from shellmesh_mdao.imprint import SNAP_FALLBACK, ChainSpec, Plane, closest_on_polyline, improve_skin, imprint_chains
+from shellmesh_mdao.imprint.common import tri_angles_min
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.pipeline import run_pipeline
 from shellmesh_mdao.project import SurfaceLocator
-from shellmesh_mdao.section import Plane
 
 SIZES = {"cessna210": 0.25, "swept_wing": 0.02, "straight_wing": 0.02, "bwb": 0.3}
 LAYOUTS = {"2spar": (0.15, 0.65), "3spar": (0.15, 0.4, 0.65)}
@@ -153,7 +152,7 @@ def test_skin_valid_closed_with_bays(geometry_dir, manifest, name, spars):
 def test_no_triangle_angle_below_10(geometry_dir, manifest, name, spars):
     lay, res = imprinted(geometry_dir, manifest, name, spars)
     mesh = res.mesh
-    ang = _tri_angles_min(mesh.points, mesh.faces[:, :3])
+    ang = tri_angles_min(mesh.points, mesh.faces[:, :3])
     assert ang.min() >= 10.0, f"{(ang < 10).sum()} triangles with an angle below 10 degrees (min {ang.min():.2f})"
 
 
@@ -217,12 +216,12 @@ def _roof_imprint():
 
 def test_improve_skin_repairs_chain_crossing_a_crease_next_to_its_vertex():
     skin, plane, mesh, chains = _roof_imprint()
-    before = _tri_angles_min(mesh.points, mesh.faces[:, :3])
+    before = tri_angles_min(mesh.points, mesh.faces[:, :3])
     assert before.min() < 5.0                                   # the case is a real one
     loc = SurfaceLocator(skin.points, skin.faces[:, :3])
     ends = mesh.points[chains[0].vertices[[0, -1]]].copy()
     out = improve_skin(mesh, loc, chains)
-    assert _tri_angles_min(out.points, out.faces[:, :3]).min() >= 10.0
+    assert tri_angles_min(out.points, out.faces[:, :3]).min() >= 10.0
     assert out.check().ok, out.check().problems()
     assert loc.closest(out.points)[2].max() <= 1e-12
     # the chain (updated in place) is a chain of mesh edges, exactly on its plane, same ends
@@ -264,7 +263,7 @@ def test_improve_skin_rounds_work_near_the_chains_and_the_poor_triangles_only():
     mesh, chains = imprint_chains(skin, skin.points, skin.faces[:, :3], [spec])
     loc = SurfaceLocator(skin.points, skin.faces[:, :3])
     T = mesh.faces[:, :3]
-    ang = _tri_angles_min(mesh.points, T)
+    ang = tri_angles_min(mesh.points, T)
     ptr, vf = vertex_faces(T, mesh.n_points)
     region = np.zeros(mesh.n_points, bool)
     region[T[face_rings(T, ptr, vf, chains[0].vertices, 3)]] = True          # 3 rings of the chain
@@ -278,6 +277,6 @@ def test_improve_skin_rounds_work_near_the_chains_and_the_poor_triangles_only():
     assert len(outside) and np.array_equal(
         np.sort(np.sort(out.faces[:, :3], 1)[(~region[out.faces[:, :3]]).all(1)], 0), outside)   # nor flip there
     star = (out.faces[:, :3] == far).any(1)
-    assert _tri_angles_min(out.points, out.faces[star, :3]).min() > ang[(T == far).any(1)].min() + 1.0
+    assert tri_angles_min(out.points, out.faces[star, :3]).min() > ang[(T == far).any(1)].min() + 1.0
     whole = improve_skin(copy.deepcopy(mesh), loc, copy.deepcopy(chains), rings=None)
     assert np.any(whole.points[~region] != mesh.points[~region])

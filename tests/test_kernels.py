@@ -713,7 +713,7 @@ def _old_tri_min_angle(A, B, C):
     return np.degrees(np.minimum(np.minimum(a0, a1), np.pi - a0 - a1))
 
 
-def _old_angles3(Pn):
+def _oldangles3(Pn):
     a, b, c = Pn[:, 0], Pn[:, 1], Pn[:, 2]
 
     def ang(u, v):
@@ -728,7 +728,7 @@ def test_triangle_angle_kernels_give_the_numpy_angles(k):
     arctan2 / arccos, equal the whole-numpy formulas they replaced (every array length,
     since numpy's vector loops treat the tail of an array apart)."""
     from shellmesh_mdao import kernels as K
-    from shellmesh_mdao.imprint import _angles3
+    from shellmesh_mdao.imprint.common import angles3
     from shellmesh_mdao.remesh.common import tri_angles as _tri_angles, tri_min_angle as _tri_min_angle
     from shellmesh_mdao.remesh.common import tri_normals as _tri_normals
 
@@ -745,12 +745,12 @@ def test_triangle_angle_kernels_give_the_numpy_angles(k):
         a0 = np.degrees(np.arctan2(np.sqrt(np.einsum("ij,ij->i", w, w)), np.einsum("ij,ij->i", u, v)))
         _same(_tri_angles(P, F)[:, 0], a0)
         _same(_tri_normals(P, F), np.cross(B - A, C - A))
-        _same(_angles3(P[F]), _old_angles3(P[F]))
+        _same(angles3(P[F]), _oldangles3(P[F]))
     # known answers: a right isosceles triangle and an equilateral one
     R = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
     np.testing.assert_allclose(_tri_angles(R, np.array([[0, 1, 2]]))[0], [90, 45, 45], atol=1e-12)
     Eq = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, np.sqrt(3) / 2, 0]])
-    np.testing.assert_allclose(_angles3(Eq[None]), [60.0], atol=1e-12)
+    np.testing.assert_allclose(angles3(Eq[None]), [60.0], atol=1e-12)
     np.testing.assert_allclose(K.corner_cosines(R[None])[0], [0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-15)
 
 

@@ -14,10 +14,11 @@ from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.imprint import ChainResult
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.members import (STRIP_MIN_ANGLE, MemberInfo, build_members, coons_patch, member_infos,
-                                    member_statistics, triangulate_planar, _tri_min_angles)
+                                    member_statistics, triangulate_planar)
+from shellmesh_mdao.members.meshing import tri_min_angles
 from shellmesh_mdao.mesh import ShellMesh, concatenate
 from shellmesh_mdao.pipeline import run_pipeline
-from shellmesh_mdao.section import Plane, SectionArc, section_arc
+from shellmesh_mdao.imprint.section import Plane, SectionArc, section_arc
 
 MIN_ANGLE = 20.0          # refined member regions (triangulate_planar's q30 with pruning)
 # any member triangle: a strip one element high keeps its boundary-only triangulation down to this
@@ -104,7 +105,7 @@ def check_member_mesh(mesh, skin_face_count, infos, allow_free_edges=False):
     assert (topo.valence[crossing] == 4).all()
     assert (topo.valence <= 4).all() and (topo.valence[n_skin > 0] <= 3).all()
     # 4. angles
-    ang = _tri_min_angles(mesh.points, mesh.faces[mem, :3])
+    ang = tri_min_angles(mesh.points, mesh.faces[mem, :3])
     assert ang.min() >= MEMBER_MIN_ANGLE, f"member triangle with angle {ang.min():.2f} deg"
     # 5. the skin is closed
     assert mesh.submesh(~mem).is_closed()
@@ -303,7 +304,7 @@ def test_non_planar_member_is_a_coons_patch():
     assert mesh.check().ok, mesh.check().problems()
     mem = member_face_mask(mesh, ["tw"])
     f = mesh.faces[mem, :3]
-    assert _tri_min_angles(mesh.points, f).min() >= MEMBER_MIN_ANGLE
+    assert tri_min_angles(mesh.points, f).min() >= MEMBER_MIN_ANGLE
     # every node on the hyperbolic paraboloid (1-t)L(s) + tU(s)
     v = np.unique(f)
     p = mesh.points[v]
@@ -377,7 +378,7 @@ def test_triangulate_planar_keeps_every_segment():
     e = np.sort(np.vstack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
     keys = set(map(tuple, e.tolist()))
     assert all(tuple(sorted(s)) in keys for s in seg.tolist())
-    assert _tri_min_angles(uv_all, tris).min() >= MIN_ANGLE
+    assert tri_min_angles(uv_all, tris).min() >= MIN_ANGLE
     a, b, c = uv_all[tris[:, 0]], uv_all[tris[:, 1]], uv_all[tris[:, 2]]
     cr = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]
     assert (cr > 0).all()
@@ -417,7 +418,7 @@ def test_triangulate_planar_strip_is_one_row_of_quad_pairs():
         assert len(uv_all) == len(uv)                          # no interior node
         on_bottom = (tris < nb).sum(1)
         assert set(on_bottom.tolist()) <= {1, 2}               # one edge on a chain, apex on the other
-        assert _tri_min_angles(uv_all, tris).min() >= STRIP_MIN_ANGLE
+        assert tri_min_angles(uv_all, tris).min() >= STRIP_MIN_ANGLE
         m = ShellMesh(np.c_[uv_all, np.zeros(len(uv_all))], tris)
         q, res = merge_triangles(m, merge_bonus=1.0)
         # at most one unmerged triangle per unit of chain-count mismatch, the rest quads
@@ -583,7 +584,7 @@ def test_member_mesh_along_a_skin_edge_is_an_imprint_error():
     (its web running along the skin, as on bwb stress seed 148 before the imprint split such
     bridges) is refused with the member's name and the place; a chain edge (two skin faces, one
     member face) and an X-junction line (two members, two faces each) pass."""
-    from shellmesh_mdao.members import _check_junction_edges
+    from shellmesh_mdao.members.build import _check_junction_edges
 
     P = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1], [0.5, 0, -1]], float)
     names = ["skin", "wing/spar_0", "wing/rib_0/seg_0", "wing/rib_0/seg_1"]

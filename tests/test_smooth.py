@@ -342,7 +342,7 @@ def test_section_polylines_cached_per_locator_and_plane():
     """A member's plane section is computed once per input skin: the same polylines as a fresh
     section (a unit cube cut at z = 0.3 is one closed square of perimeter 4), read-only, and a
     second skin or plane gets its own."""
-    from shellmesh_mdao.section import Plane, plane_section
+    from shellmesh_mdao.imprint.section import Plane, plane_section
     from shellmesh_mdao.smooth import section_polylines
     box = trimesh.creation.box()
     loc = SurfaceLocator(box.vertices, box.faces)
