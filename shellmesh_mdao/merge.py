@@ -36,12 +36,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import sparse
 
+from .core.highs import highs_solve, highs_solve_halves
+from .core.supports import PLANE, SURFACE, Supports, pipeline_supports, supports_hold
+from .core.topology import fixed_edge_mask
 from .errors import MeshValidationError
 from .kernels import safe_matching_rounds
 from .mesh import ShellMesh, norm_rows
-from .split import _fixed_edge_mask, _highs_solve, _highs_solve_halves, polygon_energy
+from .split import polygon_energy
 
-__all__ = ["MergeResult", "interior_vertices", "merge_candidates", "merge_triangles", "quad_energy"]
+__all__ = ["MergeResult", "interior_vertices", "merge_candidates", "merge_triangles", "merge_mesh", "quad_energy"]
 
 
 @dataclass
@@ -102,7 +105,7 @@ def merge_candidates(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: f
     """
     topo = mesh.topology()
     faces = mesh.faces
-    fixed = _fixed_edge_mask(topo, mesh.feature_edges if fixed_edges is None else fixed_edges)
+    fixed = fixed_edge_mask(topo, mesh.feature_edges if fixed_edges is None else fixed_edges)
     order = np.lexsort((topo.he_face, topo.he_edge))
     he_e = topo.he_edge[order]
     first = np.flatnonzero(np.r_[True, he_e[1:] != he_e[:-1]]) if len(he_e) else np.zeros(0, np.int64)
@@ -267,7 +270,7 @@ def _valence_block(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_li
     k = len(w)
     V, vid = _counted(E.reshape(-1), vmask, n_points)
     A, c, lo, hi, ub = _valence_model(E, f0, f1, w, vid, valence[V] - 4.0 - done[V], lam)
-    sol = _highs_solve_halves(c, A, lo, hi, ub, time_limit=time_limit)
+    sol = highs_solve_halves(c, A, lo, hi, ub, time_limit=time_limit)
     seconds = sol.seconds
     if sol.x is None:
         return None, float("nan"), sol.status, sol.status, seconds
@@ -284,7 +287,7 @@ def _valence_block(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time_li
         V2, vid2 = _counted(E[rest].reshape(-1), vmask, n_points)
         A2, c2, lo2, hi2, ub2 = _valence_model(E[rest], f0[rest], f1[rest], w[rest], vid2,
                                                valence[V2] - 4.0 - now[V2], lam)
-        sub = _highs_solve(c2, A2, lo2, hi2, ub2, integer=True, time_limit=time_limit, mip_gap=0.0)
+        sub = highs_solve(c2, A2, lo2, hi2, ub2, integer=True, time_limit=time_limit, mip_gap=0.0)
         seconds += sub.seconds
         status = sub.status
         if sub.x is not None:
@@ -440,7 +443,7 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
                 x[ridx] = 1.0
             else:
                 start = _greedy_matching(r0, r1, rw, m)
-                sol = _highs_solve(rw, A, np.full(nr, -np.inf), np.ones(nr),
+                sol = highs_solve(rw, A, np.full(nr, -np.inf), np.ones(nr),
                                    np.ones(len(ridx)), integer=True, time_limit=time_limit,
                                    mip_gap=mip_gap, start=start, presolve=False)
                 solve_s = sol.seconds
@@ -476,3 +479,33 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
                       quad_fraction=nq / max(out.n_faces, 1),
                       merged_edges=mesh.topology().edges[edge[take]])
     return out, res
+
+
+def merge_mesh(mesh: ShellMesh, supports: Supports | None, locator, infos, *, time_limit: float, mip_gap: float,
+               merge_bonus: float, valence_weight: float) -> tuple[ShellMesh, Supports, dict]:
+    """The pipeline's merge stage: :func:`merge_triangles` on the whole mesh, the valence term
+    counting the nodes free to move within their surface or member plane (``supports``' SURFACE
+    and PLANE nodes), and the supports of the result: the split stage's ``supports`` where they
+    hold, else derived again (:func:`~shellmesh_mdao.core.supports.pipeline_supports` with the
+    input skin ``locator`` and the members ``infos``).
+
+    Returns ``(mesh, supports, report)``, ``report`` the pipeline report's ``merge`` entry."""
+    # the valence term counts the nodes free to move within their surface or member plane: on
+    # chains, feature lines and junctions the best valence is not 4
+    sp = supports
+    free = (np.flatnonzero(np.isin(sp.kind, (SURFACE, PLANE)))
+            if sp is not None and sp.n == mesh.n_points else None)
+    out, res = merge_triangles(mesh, time_limit=time_limit, mip_gap=mip_gap, merge_bonus=merge_bonus,
+                               valence_weight=valence_weight, valence_vertices=free)
+    # a merge joins two triangles of one component across an edge that is no feature edge: no
+    # point, feature edge or fixed vertex changes, nor any vertex's set of incident supports, so
+    # the split stage's supports hold as they are (the same arrays as deriving them again)
+    same = supports is not None and supports.n == out.n_points and supports_hold(mesh, out)
+    sup = supports if same else pipeline_supports(out, locator, infos)
+    # a gap that is not a number (no bound: the valence term in blocks; a solve cut short) is null
+    gap = float(res.mip_gap) if np.isfinite(res.mip_gap) else None
+    report = {"status": res.status, "objective": float(res.objective), "mip_gap": gap,
+              "n_merged": int(res.n_merged), "n_candidates": int(res.n_candidates),
+              "quad_fraction": round(float(res.quad_fraction), 4), "seconds": round(res.seconds, 4),
+              "solve_seconds": round(res.solve_seconds, 4), "valence_weight": valence_weight}
+    return out, sup, report

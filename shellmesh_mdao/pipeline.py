@@ -24,19 +24,11 @@ import numpy as np
 
 from .errors import SizeError, ShellMeshError
 from .mesh import ShellMesh, norm_rows
-from .quality import scaled_jacobian, warp
 
 log = logging.getLogger("shellmesh_mdao")
 
 #: Stages in order; ``--until`` takes one of these.
 STAGES = ("load", "layout", "project", "remesh", "imprint", "members", "split", "merge", "smooth", "quad")
-
-#: Elements at or below this scaled Jacobian are reported (count, ids) and logged as a warning.
-POOR_JACOBIAN = 0.2
-
-#: Skin nodes farther than this fraction of the model's bounding-box diagonal from the input
-#: surface are reported (report key ``off_surface``) and logged as a warning.
-OFF_SURFACE_TOL = 1e-6
 
 #: The skin is remeshed at this multiple of the final quad size: merging pairs triangles into
 #: quads and the final subdivision halves every edge.
@@ -420,82 +412,38 @@ def stage_members(state: PipelineState) -> PipelineState:
     return st
 
 
-def _supports_hold(before: ShellMesh, after: ShellMesh) -> bool:
-    """Whether a stage's result keeps what the node supports are derived from: the points,
-    feature edges (and their ids), fixed vertices and component names (with the same faces and
-    components too, the split stage's; the merge changes faces only within a component)."""
-    return (np.array_equal(after.points, before.points)
-            and np.array_equal(after.feature_edges, before.feature_edges)
-            and np.array_equal(after.feature_edge_ids, before.feature_edge_ids)
-            and np.array_equal(after.fixed_vertices, before.fixed_vertices)
-            and after.component_names == before.component_names)
-
-
 def stage_split(state: PipelineState) -> PipelineState:
     """Splitting LP (paper eq. 1-3) on the whole mesh; chains, junctions and feature lines are
-    never split. Derives the node supports (input skin, member planes, feature curves)."""
-    from .core.threads import Background
-    from .smooth import edge_midpoint_projector, pipeline_supports
-    from .split import split_polygons
+    never split. Derives the node supports (input skin, member planes, feature curves)
+    (:func:`~shellmesh_mdao.split.split_mesh`)."""
+    from .split import split_mesh
 
     _need(state, "split")
-    before = state.mesh
-
-    def supports_and_projector():
-        s = pipeline_supports(before, state.locator, state.infos)
-        return s, edge_midpoint_projector(before, s)
-
-    # made in a second thread while split_polygons builds and solves its LP (HiGHS releases the
-    # GIL): the same values as made before it (the target case's split stage 0.154 -> 0.139 s,
-    # docs/benchmarks.md, fifteenth pass)
-    made = Background(supports_and_projector)
-    mesh, res = split_polygons(before, time_limit=state.options.split_time_limit,
-                               project=lambda points, parent_edges: made.result()[1](points, parent_edges))
-    sup = made.result()[0]
-    # where no edge was split (the target case) the mesh is the same and so are its supports
-    if not (_supports_hold(before, mesh) and np.array_equal(mesh.faces, before.faces)
-            and np.array_equal(mesh.component, before.component)):
-        sup = pipeline_supports(mesh, state.locator, state.infos)
+    mesh, sup, report = split_mesh(state.mesh, state.locator, state.infos,
+                                   time_limit=state.options.split_time_limit)
     st = state.but(mesh=mesh, supports=sup, stage="split")
-    st.report["split"] = {"status": res.status, "objective": float(res.objective), "used_mip": bool(res.used_mip),
-                          "n_split_edges": int(res.n_split_edges), "seconds": round(res.seconds, 4)}
+    st.report["split"] = report
     return st
 
 
 def stage_merge(state: PipelineState) -> PipelineState:
-    """Triangle-merging MIP (paper eq. 4-5) on the whole mesh."""
-    from .merge import merge_triangles
-    from .smooth import PLANE, SURFACE, pipeline_supports
+    """Triangle-merging MIP (paper eq. 4-5) on the whole mesh (:func:`~shellmesh_mdao.merge.merge_mesh`)."""
+    from .merge import merge_mesh
 
     _need(state, "merge")
     o = state.options
-    # the valence term counts the nodes free to move within their surface or member plane: on
-    # chains, feature lines and junctions the best valence is not 4
-    sp = state.supports
-    free = (np.flatnonzero(np.isin(sp.kind, (SURFACE, PLANE)))
-            if sp is not None and sp.n == state.mesh.n_points else None)
-    mesh, res = merge_triangles(state.mesh, time_limit=o.merge_time_limit, mip_gap=o.merge_mip_gap,
-                                merge_bonus=o.merge_bonus, valence_weight=o.merge_valence_weight,
-                                valence_vertices=free)
-    # a merge joins two triangles of one component across an edge that is no feature edge: no
-    # point, feature edge or fixed vertex changes, nor any vertex's set of incident supports, so
-    # the split stage's supports hold as they are (the same arrays as deriving them again)
-    same = state.supports is not None and state.supports.n == mesh.n_points and _supports_hold(state.mesh, mesh)
-    sup = state.supports if same else pipeline_supports(mesh, state.locator, state.infos)
+    mesh, sup, report = merge_mesh(state.mesh, state.supports, state.locator, state.infos,
+                                   time_limit=o.merge_time_limit, mip_gap=o.merge_mip_gap, merge_bonus=o.merge_bonus,
+                                   valence_weight=o.merge_valence_weight)
     st = state.but(mesh=mesh, supports=sup, stage="merge")
-    # a gap that is not a number (no bound: the valence term in blocks; a solve cut short) is null
-    gap = float(res.mip_gap) if np.isfinite(res.mip_gap) else None
-    st.report["merge"] = {"status": res.status, "objective": float(res.objective), "mip_gap": gap,
-                          "n_merged": int(res.n_merged), "n_candidates": int(res.n_candidates),
-                          "quad_fraction": round(float(res.quad_fraction), 4), "seconds": round(res.seconds, 4),
-                          "solve_seconds": round(res.solve_seconds, 4), "valence_weight": o.merge_valence_weight}
+    st.report["merge"] = report
     return st
 
 
 def stage_smooth(state: PipelineState) -> PipelineState:
     """Smoothing QP (paper eq. 6-8): tangent-plane steps, KKT solve, projection back onto the
     input skin / member planes / feature curves; no step folds an element."""
-    from .smooth import smooth
+    from .smooth import smooth, smooth_report
 
     _need(state, "smooth")
     # a triangle's scaled Jacobian bounds its three child quads' after subdivision: keep every
@@ -505,261 +453,27 @@ def stage_smooth(state: PipelineState) -> PipelineState:
                        target_edge=REMESH_FACTOR * state.size, warp_weight=state.options.smooth_warp_weight,
                        warp_from=state.options.warp_from, warp_spread=state.options.smooth_warp_spread)
     st = state.but(mesh=mesh, stage="smooth")
-    st.report["smooth"] = _smooth_report(res)
+    st.report["smooth"] = smooth_report(res)
     return st
-
-
-def _warp_p99(mesh: ShellMesh, w: np.ndarray | None = None) -> float:
-    """99th percentile of the quads' warp (degrees; 0 without quads), the acceptance's measure;
-    ``w``: the warp of every face, if already measured."""
-    if not mesh.n_quads:
-        return 0.0
-    return float(np.percentile(warp(mesh.points, mesh.faces)[~mesh.is_tri] if w is None else w[~mesh.is_tri], 99))
 
 
 def stage_quad(state: PipelineState) -> PipelineState:
     """One subdivision to all quads (quad -> 4, triangle -> 3) over skin and members, new nodes
-    projected onto their supports, then a final smoothing pass; elements still at or below
-    :data:`POOR_JACOBIAN` are repaired locally (:func:`~shellmesh_mdao.smooth.untangle` on the two
-    rings around them; report key ``poor_repair``), and what remains is reported and logged. Last,
-    the free skin nodes around the quads still warped above ``warp_goal`` move along their normals,
-    off the input by at most ``planar_offset`` times the size (:func:`~shellmesh_mdao.quad.planarize`;
-    report key ``planarize``). Where the warp p99 is above ``warp_goal`` after the final smoothing
-    and that last move alone does not bring it to the goal, a second smoothing pass with the quad
-    planarity term runs, around the quads that move left above the goal (``final_warp_weight``;
-    report key ``final_smooth.warp_term``), from the move's mesh with the nodes it may move put back
-    where they were before the move; only those nodes are moved off the facets again after it
-    (:func:`_finish_region`), and the result is kept only if its warp p99 is below the move alone's
-    (``warp_term.kept``: ``"pass"`` or ``"planarize_alone"``)."""
-    from .mesh import vertex_faces
-    from .quad import subdivide_to_quads
-    from .core.topology import face_rings
-    from .smooth import mesh_figures, smooth
+    projected onto their supports, then the final smoothing, the repair of poor elements and the
+    flattening of warped quads (:func:`~shellmesh_mdao.quad.quad_mesh`: the policy, its options
+    and report keys)."""
+    from .quad import quad_mesh
 
     _need(state, "quad")
     o = state.options
-    q, sup = subdivide_to_quads(state.mesh, state.supports, guard_jacobian=o.guard_jacobian)
-    warp_term = None
-    done = None
-    if o.final_iterations:
-        # the first pass's figures after it are taken only if no second pass follows
-        q, res = smooth(q, sup, iterations=o.final_iterations, energy=o.smooth_energy, target_edge=state.size,
-                        ortho_weight=o.final_ortho_weight, refresh=o.final_refresh, figures="before")
-        # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
-        # where the warp p99 acceptance is missed and the planarize move alone cannot meet it
-        wq = warp(q.points, q.faces)
-        p99 = _warp_p99(q, wq)
-        warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
-        second_pass = o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal)
-        trial = None
-        if second_pass and o.planar_offset > 0 and o.warp_goal > 0:
-            # first the cheap way: the planarize move (and the settle and repair before it) on
-            # this pass's mesh; kept if it meets the goal, else the second pass runs on this
-            # pass's mesh, around the quads that move left above the goal
-            trial = _finish_quads(state, q, sup)
-            alone = trial["planar"]["warp_p99_after"]
-            warp_term["planarize_alone_p99"] = alone
-            if alone <= o.warp_goal:
-                done, second_pass = trial, False
-        if second_pass:
-            # only around the quads still warped (two rings): the rest of the mesh keeps the first
-            # pass. With the planarize trial: the quads it left above the goal (it flattens the
-            # others without the pass); without it, every quad in the planarity term
-            vptr, vface = vertex_faces(q.faces, q.n_points)
-            if trial is not None:
-                tm = trial["mesh"]
-                seeds = warp(tm.points, tm.faces) > o.warp_goal
-            else:
-                seeds = wq > o.warp_from
-            warp_term["seed_quads"] = int(seeds.sum())
-            warped = np.unique(q.faces[seeds])
-            region = face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
-            movable = np.unique(q.faces[region])
-            movable = movable[movable >= 0]
-            first = (q, res)
-            if trial is not None:
-                # the pass starts from the trial's mesh (settled, repaired, moved off the facets),
-                # the region's nodes back where they were before the move: outside the region the
-                # trial's result stands, and only the region is settled and moved again after it
-                start = tm.points.copy()
-                start[movable] = trial["before_planar"].points[movable]
-                q = q.with_points(start)
-            q, res2 = smooth(q, sup, iterations=o.final_warp_iterations, energy=o.smooth_energy,
-                             target_edge=state.size, ortho_weight=o.final_ortho_weight,
-                             warp_weight=o.final_warp_weight, warp_from=o.warp_from, vertices=movable,
-                             figures="after")
-            res = dataclasses.replace(
-                res2, quality_before=res.quality_before, moves=res.moves + res2.moves,
-                max_move=max(res.max_move, res2.max_move),
-                **{f: getattr(res, f) + getattr(res2, f) for f in (
-                    "iterations", "seconds", "factorisations", "n_step_halvings", "n_rejected", "n_fold_hits",
-                    "n_jump_hits")})
-            warp_term.update(applied=True, warp_p99_after=_warp_p99(q), vertices=int(len(movable)))
-            if trial is not None:
-                # the pass and the move after it must beat the move alone, else the move alone
-                # on the first pass's mesh is kept (its scaled Jacobians are the better ones)
-                done = _finish_region(state, q, sup, movable, trial)
-                if done["planar"]["warp_p99_after"] >= trial["planar"]["warp_p99_after"]:
-                    done, (q, res) = trial, first
-                    res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, state.size))
-                    warp_term["kept"] = "planarize_alone"
-                else:
-                    warp_term["kept"] = "pass"
-        else:
-            res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, state.size))
-    if done is None:
-        done = _finish_quads(state, q, sup)
-    q, sj, poor = done["mesh"], done["sj"], done["poor"]
-    off_surface, warning = _off_surface(state, done, sup)
-    if warning:
-        log.warning(warning)
+    q, sup, report = quad_mesh(state.mesh, state.supports, state.size, guard_jacobian=o.guard_jacobian,
+                               final_iterations=o.final_iterations, final_refresh=o.final_refresh,
+                               final_warp_iterations=o.final_warp_iterations, smooth_energy=o.smooth_energy,
+                               final_ortho_weight=o.final_ortho_weight, final_warp_weight=o.final_warp_weight,
+                               warp_from=o.warp_from, warp_goal=o.warp_goal, planar_offset=o.planar_offset)
     st = state.but(mesh=q, supports=sup, stage="quad")
-    if o.final_iterations:
-        st.report["final_smooth"] = _smooth_report(res)
-        st.report["final_smooth"]["warp_term"] = warp_term
-    if done["repair"] is not None:
-        st.report["poor_repair"] = done["repair"]
-    st.report["off_surface"] = off_surface
-    st.report["planarize"] = done["planar"]
-    st.report["poor_elements"] = {"threshold": POOR_JACOBIAN, "count": int(len(poor)),
-                                  "folded": int((sj <= 0).sum()), "elements": poor[:100].tolist(),
-                                  "min_scaled_jacobian": float(sj.min()) if len(sj) else None}
-    if len(poor):
-        where = sorted({q.component_names[c] for c in q.component[poor]})
-        log.warning("%d element(s) with scaled Jacobian <= %.1f (min %.3f) in %s: they come from sliver triangles "
-                    "of the imprint that no stage could remove; see the report's 'poor_elements' (0-based ids)",
-                    len(poor), POOR_JACOBIAN, float(sj.min()), ", ".join(where[:5]))
+    st.report.update(report)
     return st
-
-
-def _repair_poor(q: ShellMesh, sup, sj):
-    """Elements at or below :data:`POOR_JACOBIAN` (scaled Jacobians ``sj`` of ``q``) repaired by
-    :func:`~shellmesh_mdao.smooth.untangle` on the two rings around them, kept if no worse.
-    Returns ``(q, sj, poor, repair)`` (``repair`` the report's figures, None without poor elements)."""
-    from .mesh import vertex_faces
-    from .core.topology import face_rings
-    from .smooth import untangle
-
-    poor = np.flatnonzero(sj <= POOR_JACOBIAN)
-    if not len(poor):
-        return q, sj, poor, None
-    # last resort: move the vertices within two rings of the poor elements along their supports
-    # (smooth.untangle: no element at or below the goal gets worse, none above falls to it)
-    vptr, vface = vertex_faces(q.faces, q.n_points)
-    region = face_rings(q.faces, vptr, vface, np.unique(q.faces[poor][q.faces[poor] >= 0]), 2)
-    q2, info = untangle(q, sup, goal=POOR_JACOBIAN + 0.1, faces=region)
-    sj2 = scaled_jacobian(q2.points, q2.faces)
-    repair = {"elements_before": int(len(poor)), "elements_after": int((sj2 <= POOR_JACOBIAN).sum()),
-              "min_before": float(sj.min()), "min_after": float(sj2.min()), "moves": int(info["moves"])}
-    n2 = int((sj2 <= POOR_JACOBIAN).sum())
-    if n2 <= len(poor) and (n2 < len(poor) or sj2.min() > sj.min()):
-        q, sj = q2, sj2
-        poor = np.flatnonzero(sj <= POOR_JACOBIAN)
-    return q, sj, poor, repair
-
-
-def _planarize(state: PipelineState, q: ShellMesh, sup, sj, poor, vertices=None):
-    """The quad stage's :func:`~shellmesh_mdao.quad.planarize` move on ``q`` (scaled Jacobians
-    ``sj``, poor elements ``poor``), moving only ``vertices`` if given. Returns ``(q, planar, sj,
-    poor)``, ``planar`` the report's figures (with the offset over the size and its bound)."""
-    from .quad import planarize
-
-    o = state.options
-    q, planar = planarize(q, sup, max_offset=o.planar_offset * state.size, warp_above=o.warp_goal,
-                          guard_jacobian=POOR_JACOBIAN + 0.1, vertices=vertices)
-    planar.update(max_offset_over_size=planar["max_offset"] / state.size, bound_over_size=o.planar_offset)
-    if planar["applied"]:
-        sj = scaled_jacobian(q.points, q.faces)
-        poor = np.flatnonzero(sj <= POOR_JACOBIAN)
-    return q, planar, sj, poor
-
-
-def _finish_region(state: PipelineState, q: ShellMesh, sup, movable, trial: dict) -> dict:
-    """:func:`_finish_quads` after the second pass, which started from the planarize trial's
-    mesh and moved only the nodes ``movable``: the elements at or below :data:`POOR_JACOBIAN`
-    repaired, then :func:`~shellmesh_mdao.quad.planarize` moving only ``movable`` (outside the
-    region the trial's move stands; the smoothing put the region's nodes on their supports, and
-    the trial settled the rest). ``before_planar``: the nodes that kept the trial's positions at
-    the trial's positions before its move. The same keys as :func:`_finish_quads`; ``planar``'s
-    ``moved`` and ``max_offset`` count the trial's moves that stand as well, and ``repair`` is
-    the trial's where the region needed none."""
-    q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
-    held = np.ones(q.n_points, bool)
-    held[movable] = False
-    held &= (q.points == trial["mesh"].points).all(1)
-    bp = q.points.copy()
-    bp[held] = trial["before_planar"].points[held]
-    before_planar = q.with_points(bp)
-    q, planar, sj, poor = _planarize(state, q, sup, sj, poor, vertices=movable)
-    # the report counts every node off the facets in the result: the region's moves and the
-    # trial's that stand outside it ("nodes": the region's candidates and those)
-    step = norm_rows(q.points - bp, axis=1)
-    kept_out = int((step[held] > 0).sum())
-    planar.update(applied=bool(planar["applied"] or kept_out), nodes=int(planar["nodes"]) + kept_out,
-                  moved=int((step > 0).sum()), max_offset=float(step.max(initial=0.0)))
-    planar.update(max_offset_over_size=planar["max_offset"] / state.size)
-    # the trial's repair stands too (the pass started from its mesh)
-    return {"mesh": q, "sj": sj, "poor": poor, "repair": trial["repair"] if repair is None else repair,
-            "settled": trial["settled"], "before_planar": before_planar, "planar": planar}
-
-
-def _finish_quads(state: PipelineState, q: ShellMesh, sup) -> dict:
-    """The quad stage after its smoothing, on ``q``: skin nodes left off the surface settled,
-    elements at or below :data:`POOR_JACOBIAN` repaired, then :func:`~shellmesh_mdao.quad.planarize`.
-    Returns ``{"mesh", "sj", "poor", "repair", "settled", "before_planar", "planar"}``
-    (``before_planar``: the mesh before planarize, whose nodes off the surface
-    :func:`_off_surface` reports for the result the caller keeps); ``q`` and ``sup`` are not
-    changed."""
-    from .quad import settle_off_surface
-
-    o = state.options
-    # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
-    # been smoothed most of them can go onto it (the same settle, no element below the guard
-    # made worse)
-    q, settled = settle_off_surface(q, sup, tol=OFF_SURFACE_TOL, guard_jacobian=o.guard_jacobian)
-    q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
-    before_planar = q
-    # quads still warped above the goal straddle kinks of the faceted input that no move along it
-    # can flatten: their free skin nodes leave the facets by at most planar_offset * size
-    planar = None
-    if o.planar_offset > 0:
-        q, planar, sj, poor = _planarize(state, q, sup, sj, poor)
-    return {"mesh": q, "sj": sj, "poor": poor, "repair": repair, "settled": settled, "before_planar": before_planar,
-            "planar": planar}
-
-
-def _off_surface(state: PipelineState, done: dict, sup) -> tuple[dict, str | None]:
-    """The report's ``off_surface`` and its warning (None if no node is off) for the result of
-    :func:`_finish_quads` the quad stage keeps (measured only for that one: a planarize trial
-    that is not kept needs neither)."""
-    from .smooth import SURFACE
-
-    # skin nodes still off the input surface: the subdivision kept a new node at its linear position
-    # where projecting it would fold a child, and neither its repair nor the one after the final
-    # smoothing (settle_off_surface) could fix that (a parent face across a crease or a ridge much
-    # tighter than the element size); measured before planarize, which moves nodes off on purpose
-    q, settled = done["before_planar"], done["settled"]
-    skin_nodes = np.flatnonzero(sup.kind == SURFACE)
-    d = sup.distance(q.points, skin_nodes) if len(skin_nodes) else np.zeros(0)
-    off = d > OFF_SURFACE_TOL * q.diagonal
-    off_surface = {"count": int(off.sum()), "max_distance": float(d.max(initial=0.0)),
-                   "before_settle": settled["before"], "settled": settled["before"] - settled["after"],
-                   "max_distance_over_size": float(d.max(initial=0.0) / state.size),
-                   "nodes": skin_nodes[off][:100].tolist()}
-    warning = None
-    if off.any():
-        k = skin_nodes[off][np.argmax(d[off])]
-        warning = (f"{int(off.sum())} skin node(s) off the input surface, up to {float(d[off].max()):.3g} "
-                   f"({float(d[off].max() / state.size):.2f} element sizes) near "
-                   f"{np.array2string(q.points[k], precision=4)}: a face spanned a crease or ridge much tighter "
-                   "than the element size there; use a smaller --size or see the report's 'off_surface' (0-based ids)")
-    return off_surface, warning
-
-
-def _smooth_report(res) -> dict:
-    return {"iterations": int(res.iterations), "seconds": round(res.seconds, 4), "max_move": float(res.max_move),
-            "n_rejected": int(res.n_rejected), "quality_before": res.quality_before,
-            "quality_after": res.quality_after}
 
 
 _STAGE_FUNCS = {"project": stage_project, "remesh": stage_remesh, "imprint": stage_imprint,

@@ -262,7 +262,7 @@ def test_box_beam_meshed_by_pipeline_matches_beam_theory():
         # the quad stage is not the default yet: make the quads the same way it will (one subdivision)
         from shellmesh_mdao.project import SurfaceLocator
         from shellmesh_mdao.quad import subdivide_to_quads
-        from shellmesh_mdao.smooth import derive_supports
+        from shellmesh_mdao.core.supports import derive_supports
 
         loc = SurfaceLocator(surface.points, surface.faces[:, :3])
         m, _ = subdivide_to_quads(m, derive_supports(m, loc), project=False)

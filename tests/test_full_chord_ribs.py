@@ -258,11 +258,12 @@ def test_quad_stage_repairs_a_poor_element(geometry_dir, manifest, monkeypatch):
     ``poor_repair``), and the moved nodes stay on their supports."""
     from shellmesh_mdao.mesh import ShellMesh
     from shellmesh_mdao.quality import scaled_jacobian
-    from shellmesh_mdao.smooth import PLANE
-    finish = pl._finish_quads
+    import shellmesh_mdao.quad.finish as F
+    from shellmesh_mdao.core.supports import PLANE
+    finish = F.finish_quads
     made = []
 
-    def with_a_poor_element(state, q, sup):
+    def with_a_poor_element(q, sup, size, **kw):
         # a member quad with a node free in its plane (v) and the corner across from it (w, on
         # the member too: the plane, or its outline)
         quads = q.faces[q.faces[:, 3] >= 0]
@@ -276,10 +277,10 @@ def test_quad_stage_repairs_a_poor_element(geometry_dir, manifest, monkeypatch):
             if sj.min() <= 0.2:
                 break
         made.append(float(sj.min()))
-        return finish(state, ShellMesh(P, q.faces, q.component, list(q.component_names), q.fixed_vertices,
-                                       q.feature_edges, q.feature_edge_ids), sup)
+        return finish(ShellMesh(P, q.faces, q.component, list(q.component_names), q.fixed_vertices,
+                                q.feature_edges, q.feature_edge_ids), sup, size, **kw)
 
-    monkeypatch.setattr(pl, "_finish_quads", with_a_poor_element)
+    monkeypatch.setattr(F, "finish_quads", with_a_poor_element)
     _, res = _run_draw(geometry_dir, manifest, 89, "cessna210")
     assert made and all(0.05 <= m <= 0.2 for m in made)
     rep = res.report["poor_repair"]

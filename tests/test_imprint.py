@@ -5,7 +5,7 @@ import trimesh
 
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.imprint import ChainSpec, closest_on_polyline, imprint_chains
-from shellmesh_mdao.imprint.section import Plane
+from shellmesh_mdao.core.section import Plane
 
 
 def wing_chains(mesh, lay, etas, spars):
@@ -173,7 +173,7 @@ def test_cut_chain_snaps_near_vertices_but_never_a_whole_triangle():
     flat skin snapped; and on a coarse skin a spar's chain broke into pieces at such a triangle,
     stress seeds 5, 32 and 35 at a remesh factor of 2.1.)"""
     from shellmesh_mdao.imprint import cut_chain
-    from shellmesh_mdao.imprint.section import section_arc
+    from shellmesh_mdao.core.section import section_arc
 
     P, T = _snap_fixture()
     M1, M2, Q = 5, 6, 12
@@ -375,7 +375,7 @@ def test_chain_depths_are_the_distance_to_the_members_other_arc():
     middle) has the median distance of its points to the lower arc as depth; a chain alone on
     its member, or without an arc, has none (inf)."""
     from shellmesh_mdao.imprint import ChainResult, chain_depths
-    from shellmesh_mdao.imprint.section import SectionArc
+    from shellmesh_mdao.core.section import SectionArc
 
     x = np.linspace(0, 1, 11)
     up = np.stack([x, np.zeros(11), 0.3 + 0.05 * (np.abs(x - 0.5) < 0.15)], 1)

@@ -299,7 +299,7 @@ def test_reduced_hessian_matches_the_scipy_products(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_min_corner_sj_matches_the_numpy_corners(seed):
-    from shellmesh_mdao.smooth import _TRI_SJ, _corner_min_sj, _corner_normals
+    from shellmesh_mdao.smooth.elements import _TRI_SJ, _corner_min_sj, _corner_normals
     rng = np.random.default_rng(400 + seed)
     nv, m = 60, 300
     P = rng.normal(size=(nv, 3)) * 10.0 ** rng.uniform(-3, 3)
@@ -315,9 +315,9 @@ def test_min_corner_sj_matches_the_numpy_corners(seed):
 
 
 def _face_quality_numpy(C, is_tri, nref):
-    """smooth._face_quality as it was before the compiled loop (the reference)."""
+    """smooth.oriented_quality as it was before the compiled loop (the reference)."""
     from shellmesh_mdao.mesh import dot_rows
-    from shellmesh_mdao.smooth import _corner_min_sj, _corner_normals
+    from shellmesh_mdao.smooth.elements import _corner_min_sj, _corner_normals
     with np.errstate(all="ignore"):
         nown = _corner_normals(C, is_tri)
         sj = _corner_min_sj(C, is_tri, nown)
@@ -327,12 +327,12 @@ def _face_quality_numpy(C, is_tri, nref):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_face_quality_matches_the_numpy_version(seed):
-    """kernels.face_quality (smooth._face_quality, the untangling's measure) against the whole-
+    """kernels.face_quality (smooth.oriented_quality, the untangling's measure) against the whole-
     array numpy formulas, bit for bit: random quads and triangles over six decades of scale, a
     zero-length edge, a degenerate element (zero normal: quality -1), flipped references,
     a reference normal with a NaN and one with a signed zero, corners with inf."""
     from shellmesh_mdao.kernels import face_quality
-    from shellmesh_mdao.smooth import _TRI_SJ, _face_quality
+    from shellmesh_mdao.smooth.elements import _TRI_SJ, oriented_quality
     rng = np.random.default_rng(700 + seed)
     m = 400
     C = rng.normal(size=(m, 4, 3)) * 10.0 ** rng.uniform(-3, 3)
@@ -350,7 +350,7 @@ def test_face_quality_matches_the_numpy_version(seed):
         ref = _face_quality_numpy(C, tri_rows, nref)
         got = face_quality(C, tri_rows, nref, _TRI_SJ)
         assert np.array_equal(got, ref, equal_nan=True)
-        assert np.array_equal(_face_quality(C, tri_rows, nref), ref, equal_nan=True)
+        assert np.array_equal(oriented_quality(C, tri_rows, nref), ref, equal_nan=True)
     assert ref[5] == -1.0 and np.isnan(ref[11])
     assert ((ref >= -2) | np.isnan(ref)).all() and (ref[np.isfinite(ref)] <= 1.0 + 1e-12).all()
     with pytest.raises(ValueError, match="corners"):
@@ -393,10 +393,10 @@ def test_ortho_jacobian_of_a_right_angle_is_zero():
 
 @pytest.mark.parametrize("seed", range(8))
 def test_closest_on_curves_matches_the_numpy_pick(seed):
-    # every segment of each query's curve as candidates of smooth._pick_nearest: the same
+    # every segment of each query's curve as candidates of core.supports._pick_nearest: the same
     # points, distances (bits, signs of zero) and segments, at scales from 1e-3 to 1e3,
     # with queries on vertices (two segments tie) and a zero-length segment (NaN, never picked)
-    from shellmesh_mdao.smooth import _pick_nearest
+    from shellmesh_mdao.core.supports import _pick_nearest
     rng = np.random.default_rng(300 + seed)
     nc = int(rng.integers(1, 6))
     lens = rng.integers(1, 40, nc)
@@ -1414,7 +1414,7 @@ def test_element_normals_and_faces_at_match_numpy(seed):
     from shellmesh_mdao.core.kernels import faces_at
     from shellmesh_mdao.kernels import element_normals
     from shellmesh_mdao.mesh import vertex_faces
-    from shellmesh_mdao.smooth import _corner_normals
+    from shellmesh_mdao.smooth.elements import _corner_normals
     rng = np.random.default_rng(80 + seed)
     n, m = 60, 300
     P = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-3, 3)

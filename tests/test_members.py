@@ -18,7 +18,7 @@ from shellmesh_mdao.members import (STRIP_MIN_ANGLE, MemberInfo, build_members, 
 from shellmesh_mdao.members.meshing import tri_min_angles
 from shellmesh_mdao.mesh import ShellMesh, concatenate
 from shellmesh_mdao.pipeline import run_pipeline
-from shellmesh_mdao.imprint.section import Plane, SectionArc, section_arc
+from shellmesh_mdao.core.section import Plane, SectionArc, section_arc
 
 MIN_ANGLE = 20.0          # refined member regions (triangulate_planar's q30 with pruning)
 # any member triangle: a strip one element high keeps its boundary-only triangulation down to this

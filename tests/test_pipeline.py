@@ -19,7 +19,7 @@ from shellmesh_mdao.errors import ShellMeshError
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.quality import element_quality, scaled_jacobian
-from shellmesh_mdao.smooth import CURVE, FIXED, PLANE, SURFACE
+from shellmesh_mdao.core.supports import CURVE, FIXED, PLANE, SURFACE
 
 WING = dict(span=2.0, root_chord=1.0, tip_chord=0.6, sweep_deg=10.0, dihedral_deg=3.0)
 SIZE = 0.05
@@ -167,13 +167,13 @@ def test_stage_order_and_options_errors():
 def test_final_pass_refreshes_every_final_refresh_steps(monkeypatch):
     """The final pass (final_iterations steps, default 4) rebuilds its frames, weights and matrix
     every final_refresh steps (default 2): 2 matrices for 4 steps, 4 with final_refresh 1."""
-    import shellmesh_mdao.smooth as sm
+    import shellmesh_mdao.quad.finish as F
 
     o = pl.PipelineOptions()
     assert (o.final_iterations, o.final_refresh) == (4, 2)
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="smooth").state
     seen = []
-    real = sm.smooth
+    real = F.smooth
 
     def recording(mesh, supports, **kw):
         out, res = real(mesh, supports, **kw)
@@ -181,7 +181,7 @@ def test_final_pass_refreshes_every_final_refresh_steps(monkeypatch):
             seen.append((kw.get("refresh"), res.iterations, res.factorisations))
         return out, res
 
-    monkeypatch.setattr(sm, "smooth", recording)
+    monkeypatch.setattr(F, "smooth", recording)
     pl.run_stage(st, "quad")
     pl.run_stage(st.but(options=dataclasses.replace(o, final_refresh=1)), "quad")
     assert seen[0][0] == 2 and seen[1][0] == 1
@@ -330,19 +330,19 @@ def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
     the others without the pass), and the report counts those quads (warp_term.seed_quads). The
     pass starts from the trial's mesh with those nodes back where they were before the move;
     the move after it moves only those nodes, so every other node keeps the trial's position."""
-    import shellmesh_mdao.smooth as sm
+    import shellmesh_mdao.quad.finish as F
     from shellmesh_mdao.mesh import vertex_faces
 
     trials, passes, regions = [], [], []
-    finish, region_finish, smooth = pl._finish_quads, pl._finish_region, sm.smooth
+    finish, region_finish, smooth = F.finish_quads, F.finish_region, F.smooth
 
-    def record_finish(state, q, sup):
-        out = finish(state, q, sup)
+    def record_finish(q, sup, size, **kw):
+        out = finish(q, sup, size, **kw)
         trials.append((q, out))
         return out
 
-    def record_region(state, q, sup, movable, trial):
-        out = region_finish(state, q, sup, movable, trial)
+    def record_region(q, sup, size, movable, trial, **kw):
+        out = region_finish(q, sup, size, movable, trial, **kw)
         regions.append((q, out))
         return out
 
@@ -351,9 +351,9 @@ def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
             passes.append((mesh, kw["vertices"]))
         return smooth(mesh, supports, **kw)
 
-    monkeypatch.setattr(pl, "_finish_quads", record_finish)
-    monkeypatch.setattr(pl, "_finish_region", record_region)
-    monkeypatch.setattr(sm, "smooth", record_smooth)
+    monkeypatch.setattr(F, "finish_quads", record_finish)
+    monkeypatch.setattr(F, "finish_region", record_region)
+    monkeypatch.setattr(F, "smooth", record_smooth)
     res = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, options={"warp_goal": 5.0})
     wt = res.report["final_smooth"]["warp_term"]
     assert wt["applied"] and len(passes) == 1 and len(trials) == 1 and len(regions) == 1
@@ -400,6 +400,8 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
     way of that rule is checked below whatever the wing's mesh,
     by reporting one side's warp worse than it is. The settle / repair / planarize tail changes
     neither the mesh nor the supports it is given."""
+    import shellmesh_mdao.quad.finish as F
+
     res = run_small((0.15, 0.65))
     wt, rep = res.report["final_smooth"]["warp_term"], res.report["planarize"]
     assert wt["warp_p99_before"] > 10.0 and not wt["applied"]
@@ -412,7 +414,7 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
         """The wing at warp_goal 5; with ``fake_call`` (1: the planarize trial, 2: the move after
         the pass) that call's warp p99 is reported as 1e9. Returns the result and the calls."""
         calls = []
-        orig, orig_region = pl._finish_quads, pl._finish_region
+        orig, orig_region = F.finish_quads, F.finish_region
 
         def record(out):
             calls.append(out)
@@ -420,9 +422,9 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
                 out = dict(out, planar=dict(out["planar"], warp_p99_after=1e9))
             return out
         with monkeypatch.context() as m:
-            m.setattr(pl, "_finish_quads", lambda state, q, sup: record(orig(state, q, sup)))
-            m.setattr(pl, "_finish_region", lambda state, q, sup, movable, trial: record(
-                orig_region(state, q, sup, movable, trial)))
+            m.setattr(F, "finish_quads", lambda q, sup, size, **kw: record(orig(q, sup, size, **kw)))
+            m.setattr(F, "finish_region", lambda q, sup, size, movable, trial, **kw: record(
+                orig_region(q, sup, size, movable, trial, **kw)))
             r = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, options={"warp_goal": 5.0})
         return r, calls
 
@@ -448,7 +450,9 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
     st = res.state
     q, sup = st.mesh, st.supports
     keep = (q.points.copy(), sup.kind.copy(), sup.ref.copy())
-    a, b = pl._finish_quads(st, q, sup), pl._finish_quads(st, q, sup)
+    o = st.options
+    opts = dict(guard_jacobian=o.guard_jacobian, planar_offset=o.planar_offset, warp_goal=o.warp_goal)
+    a, b = F.finish_quads(q, sup, st.size, **opts), F.finish_quads(q, sup, st.size, **opts)
     assert a["mesh"].points.tobytes() == b["mesh"].points.tobytes() and a["planar"] == b["planar"]
     assert np.array_equal(q.points, keep[0]) and np.array_equal(sup.kind, keep[1]) and np.array_equal(sup.ref, keep[2])
 
@@ -458,7 +462,7 @@ def test_split_supports_are_those_of_its_mesh(remesh):
     """The split stage derives the supports before the LP (for the new midpoints) and again on
     its result, unless no edge was split (then the mesh, and so its supports, are the same: the
     remeshed wing here, and the target case); either way they equal supports derived afresh."""
-    from shellmesh_mdao.smooth import pipeline_supports
+    from shellmesh_mdao.core.supports import pipeline_supports
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="split", remesh=remesh).state
     assert (st.report["split"]["n_split_edges"] == 0) == remesh
     again = pipeline_supports(st.mesh, st.locator, st.infos)
@@ -475,21 +479,21 @@ def test_split_supports_are_made_beside_its_lp(monkeypatch, remesh):
     its new nodes go through the projector)."""
     import threading
 
-    import shellmesh_mdao.smooth as sm
-    from shellmesh_mdao.split import split_polygons
+    import shellmesh_mdao.split as S
+    from shellmesh_mdao.core.supports import edge_midpoint_projector, pipeline_supports
 
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="members", remesh=remesh).state
-    sup0 = sm.pipeline_supports(st.mesh, st.locator, st.infos)
-    eager, _ = split_polygons(st.mesh, time_limit=st.options.split_time_limit,
-                              project=sm.edge_midpoint_projector(st.mesh, sup0))
+    sup0 = pipeline_supports(st.mesh, st.locator, st.infos)
+    eager, _ = S.split_polygons(st.mesh, time_limit=st.options.split_time_limit,
+                                project=edge_midpoint_projector(st.mesh, sup0))
     threads = []
-    real = sm.pipeline_supports
+    real = S.pipeline_supports
 
     def recording(*a, **k):
         threads.append(threading.get_ident())
         return real(*a, **k)
 
-    monkeypatch.setattr(sm, "pipeline_supports", recording)
+    monkeypatch.setattr(S, "pipeline_supports", recording)
     out = pl.run_stage(st, "split")
     assert threads and threads[0] != threading.get_ident()
     assert (out.report["split"]["n_split_edges"] > 0) == (not remesh)
@@ -515,7 +519,7 @@ def test_merge_keeps_the_split_supports():
     """The merge stage hands on the split stage's supports: merging two triangles of one
     component changes no point, feature edge or fixed vertex, nor any vertex's supports. They are
     the same arrays and curves as deriving them again on the merged mesh."""
-    from shellmesh_mdao.smooth import pipeline_supports
+    from shellmesh_mdao.core.supports import pipeline_supports
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="split").state
     merged = pl.run_stage(st, "merge")
     assert merged.supports is st.supports and merged.mesh.n_quads > 0

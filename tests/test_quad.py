@@ -9,8 +9,9 @@ from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.project import SurfaceLocator
 from shellmesh_mdao.quad import planarize, settle_off_surface, subdivide_to_quads
 from shellmesh_mdao.quality import element_quality, scaled_jacobian
-from shellmesh_mdao.smooth import (CURVE, FIXED, PLANE, SURFACE, Supports, derive_supports, mesh_figures,
-                                   polylines_from_edges)
+from shellmesh_mdao.core.supports import (CURVE, FIXED, PLANE, SURFACE, Supports, derive_supports,
+                                          polylines_from_edges)
+from shellmesh_mdao.smooth import mesh_figures
 
 SQ = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
 FLAT = SurfaceLocator(SQ * 4 - [1.5, 1.5, 0], [[0, 1, 2], [0, 2, 3]])
@@ -331,7 +332,7 @@ def test_bounded_least_squares_against_lsq_linear_cold_and_warm():
     from scipy import sparse
     from scipy.optimize import lsq_linear
 
-    from shellmesh_mdao.quad import _bounded_least_squares
+    from shellmesh_mdao.quad.planar import _bounded_least_squares
 
     rng = np.random.default_rng(3)
     m, n = 300, 200

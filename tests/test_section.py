@@ -4,7 +4,7 @@ import pytest
 
 from shellmesh_mdao.errors import ImprintError
 from shellmesh_mdao.geometry import naca_wing
-from shellmesh_mdao.imprint.section import Plane, plane_section, section_arc
+from shellmesh_mdao.core.section import Plane, plane_section, section_arc
 
 
 def _point_to_tri_distance(p, a, b, c):

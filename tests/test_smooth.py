@@ -13,8 +13,9 @@ from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.project import SurfaceLocator
 from shellmesh_mdao.quad import subdivide_to_quads
 from shellmesh_mdao.quality import scaled_jacobian
-from shellmesh_mdao.smooth import (CG_RTOL, CURVE, FIXED, PLANE, SURFACE, Curve, CurveSet, Supports, derive_supports,
-                                   polylines_from_edges, smooth)
+from shellmesh_mdao.core.supports import (CURVE, FIXED, PLANE, SURFACE, Curve, CurveSet, Supports, derive_supports,
+                                          polylines_from_edges)
+from shellmesh_mdao.smooth import CG_RTOL, smooth
 
 
 def grid(nx, ny, x0=0.0, y0=0.0, sx=1.0, sy=1.0):
@@ -312,7 +313,7 @@ def test_curve_set_matches_each_curve_bit_for_bit(scan, monkeypatch):
     and queries far beyond the set's extent (answered curve by curve). ``scan``: the longest
     curve scanned whole by the compiled loop (0: every query through the KD-tree; 40: the
     two 40-segment curves scanned, the others through the tree)."""
-    import shellmesh_mdao.smooth as sm
+    import shellmesh_mdao.core.supports as sm
     monkeypatch.setattr(sm, "SCAN_SEGMENTS", scan)
     rng = np.random.default_rng(7)
     s = np.linspace(0.0, 2.0, 41)
@@ -342,8 +343,8 @@ def test_section_polylines_cached_per_locator_and_plane():
     """A member's plane section is computed once per input skin: the same polylines as a fresh
     section (a unit cube cut at z = 0.3 is one closed square of perimeter 4), read-only, and a
     second skin or plane gets its own."""
-    from shellmesh_mdao.imprint.section import Plane, plane_section
-    from shellmesh_mdao.smooth import section_polylines
+    from shellmesh_mdao.core.supports import section_polylines
+    from shellmesh_mdao.core.section import Plane, plane_section
     box = trimesh.creation.box()
     loc = SurfaceLocator(box.vertices, box.faces)
     got = section_polylines(loc, [0, 0, 0.3], [0, 0, 1])
@@ -367,7 +368,7 @@ def test_section_polylines_cached_per_locator_and_plane():
 def test_section_cache_is_bounded(monkeypatch):
     """A study keeps its loaded skin while the member planes move from run to run: the cache
     keeps the most recently used SECTION_CACHE_SIZE planes per locator, not every plane ever asked."""
-    import shellmesh_mdao.smooth as S
+    import shellmesh_mdao.core.supports as S
     monkeypatch.setattr(S, "SECTION_CACHE_SIZE", 4)
     box = trimesh.creation.box()
     loc = SurfaceLocator(box.vertices, box.faces)
@@ -512,10 +513,10 @@ def _warp_energy(term, x):
 
 
 def test_warp_term_gradient_and_hessian_are_those_of_its_energy():
-    """The quad planarity term (smooth._Warp): with zero support normals its gradient and its
+    """The quad planarity term (smooth.energy.WarpTerm): with zero support normals its gradient and its
     Hessian (identity tangent columns) are the exact derivatives of 1/2 sum w r^2; planar quads
     (warp below warp_from) are not in it."""
-    from shellmesh_mdao.smooth import _Warp
+    from shellmesh_mdao.smooth.energy import WarpTerm
     rng = np.random.default_rng(4)
     P, F, _ = grid(4, 3)
     P[:, 2] = rng.uniform(-0.15, 0.15, len(P))                     # twisted quads
@@ -523,7 +524,7 @@ def test_warp_term_gradient_and_hessian_are_those_of_its_energy():
     P2 = np.vstack([P, flat])
     F2 = np.vstack([F, F + len(P)])
     n = len(P2)
-    term = _Warp(P2, F2, np.ones(len(F2), bool), 0.7, lambda v: np.zeros((len(v), 3)), 1.0)
+    term = WarpTerm(P2, F2, np.ones(len(F2), bool), 0.7, lambda v: np.zeros((len(v), 3)), 1.0)
     assert 0 < len(term) <= len(F) and (term.q < len(P)).all()
     g = term.gradient(P2, n)
     eps = 1e-6
@@ -599,13 +600,13 @@ def test_warp_weight_flattens_quads_over_a_kink_and_keeps_them_on_the_surface():
 
 
 def test_warp_spread_leaves_out_quads_draped_over_a_tight_crease():
-    """_Warp(warp_spread=s): a warped quad that shares a vertex with a face (itself included)
+    """WarpTerm(warp_spread=s): a warped quad that shares a vertex with a face (itself included)
     whose corners' support normals are more than s degrees apart (draped over a crease much
     tighter than itself) is not in the term; corners on curves or fixed (zero normal) do not
     count. On a roof with a 100 degree ridge every ridge quad is left out at spread 75, so the
     smoothing is the plain one bit for bit, while without the limit the term pulls at them; on
     the 24 degree roof the limit changes nothing, bit for bit."""
-    from shellmesh_mdao.smooth import _Warp
+    from shellmesh_mdao.smooth.energy import WarpTerm
     rng = np.random.default_rng(5)
     quads = [grid(1, 1, x0=3.0 * k)[0] for k in range(4)]            # four separate quads
     P = np.vstack(quads)
@@ -622,8 +623,8 @@ def test_warp_spread_leaves_out_quads_draped_over_a_tight_crease():
     nrm[F[2, 2]] = 0.0                                               # quad 2: one corner on a curve
     nrm[F[3, 1]] = 0.0                                               # quad 3: a fixed corner, and
     nrm[F[3, 2]] = tilted(80)                                        # 80 deg between two others
-    assert len(_Warp(P, F, np.ones(4, bool), 1.0, lambda v: nrm[v], 1.0)) == 4
-    term = _Warp(P, F, np.ones(4, bool), 1.0, lambda v: nrm[v], 1.0, warp_spread=75.0)
+    assert len(WarpTerm(P, F, np.ones(4, bool), 1.0, lambda v: nrm[v], 1.0)) == 4
+    term = WarpTerm(P, F, np.ones(4, bool), 1.0, lambda v: nrm[v], 1.0, warp_spread=75.0)
     assert np.array_equal(term.q, F[[1, 2]])
     sharp, sup = _roof(kink_deg=100.0)
     plain, _ = smooth(sharp, sup, iterations=10)
@@ -720,18 +721,18 @@ def test_trust_radius_query_in_its_own_thread():
 
 
 def test_ldl_reuses_the_ordering_with_the_same_bits():
-    """_LDL keeps qdldl's ordering and symbolic factorisation while the pattern repeats (the
+    """LDL keeps qdldl's ordering and symbolic factorisation while the pattern repeats (the
     smoothing's refreshed matrices, planarize's rounds): each solve has the bits of a fresh
     factorisation of that matrix, and a new pattern gets a fresh one."""
     import qdldl
     from scipy import sparse
 
-    from shellmesh_mdao.smooth import _LDL, _Linear
+    from shellmesh_mdao.smooth import LDL, LinearSolver
     rng = np.random.default_rng(8)
     n = 400
     A = sparse.random(n, n, density=0.02, random_state=3, format="csr")
     pattern = (A + A.T + sparse.eye(n)).tocsr()
-    ldl = _LDL()
+    ldl = LDL()
     b = rng.normal(size=n)
     solvers = []
     for k in range(3):
@@ -743,8 +744,8 @@ def test_ldl_reuses_the_ordering_with_the_same_bits():
         solvers.append(s)
         fresh = qdldl.Solver(U, upper=True)
         assert np.array_equal(s.solve(b), fresh.solve(b))
-        lin = _Linear(M, "lu", ldl)
-        assert np.array_equal(lin.solve(b), _Linear(M, "lu").solve(b))
+        lin = LinearSolver(M, "lu", ldl)
+        assert np.array_equal(lin.solve(b), LinearSolver(M, "lu").solve(b))
     assert solvers[0] is solvers[1] is solvers[2]                     # one ordering for the pattern
     other = sparse.triu((sparse.eye(n) * 2.0).tocsr(), format="csc")
     assert ldl.factor(other.indptr, other.indices, other.data) is not solvers[0]

@@ -356,11 +356,11 @@ def test_highs_solve_prints_nothing(capfd):
     the middle of the CLI's progress lines and of a caller's own output."""
     from scipy import sparse
 
-    from shellmesh_mdao.split import _highs_solve
+    from shellmesh_mdao.core.highs import highs_solve
     A = sparse.csr_matrix(np.array([[1.0, 1.0]]))
     for integer in (False, True):
-        res = _highs_solve(np.array([1.0, 2.0]), A, np.array([1.0]), np.array([1.0]), np.ones(2), integer=integer,
-                           time_limit=10.0)
+        res = highs_solve(np.array([1.0, 2.0]), A, np.array([1.0]), np.array([1.0]), np.ones(2), integer=integer,
+                          time_limit=10.0)
         assert res.status == "Optimal" and np.allclose(res.x, [1.0, 0.0])
     out, err = capfd.readouterr()
     assert out == "" and err == ""
@@ -375,10 +375,10 @@ def test_highs_mip_with_start_skips_feasibility_jump_and_stays_optimal(monkeypat
     import highspy
     from scipy import sparse
 
-    from shellmesh_mdao import split as sp
+    from shellmesh_mdao.core import highs as H
 
     set_calls = []
-    base = sp._highs_core(highspy)
+    base = H._highs_core(highspy)
 
     class Recording(base):
         def setOptionValue(self, name, value):
@@ -386,7 +386,7 @@ def test_highs_mip_with_start_skips_feasibility_jump_and_stays_optimal(monkeypat
             set_calls.append((name, value, status))
             return status
 
-    monkeypatch.setattr(sp, "_highs_core", lambda hp: Recording)
+    monkeypatch.setattr(H, "_highs_core", lambda hp: Recording)
     # a weighted matching on a 6-cycle with a chord: one binary per edge, at most one chosen
     # edge at each node; minimise the (negative) weights
     edges = [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (5, 0), (1, 4)]
@@ -396,8 +396,8 @@ def test_highs_mip_with_start_skips_feasibility_jump_and_stays_optimal(monkeypat
     A = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(6, len(edges)))
     start = np.zeros(len(edges))
     start[1] = 1.0                                       # a feasible but poor matching
-    res = sp._highs_solve(w, A, np.full(6, -np.inf), np.ones(6), np.ones(len(edges)), integer=True,
-                          time_limit=10.0, mip_gap=0.0, start=start)
+    res = H.highs_solve(w, A, np.full(6, -np.inf), np.ones(6), np.ones(len(edges)), integer=True,
+                        time_limit=10.0, mip_gap=0.0, start=start)
     best = min(float(w @ np.array(x)) for x in itertools.product((0, 1), repeat=len(edges))
                if (A @ np.array(x, float) <= 1).all())
     assert res.status == "Optimal" and res.objective == pytest.approx(best)
@@ -405,7 +405,7 @@ def test_highs_mip_with_start_skips_feasibility_jump_and_stays_optimal(monkeypat
     assert jump and jump[0][1] is False and jump[0][2] == highspy.HighsStatus.kOk
     # without a start (the LP, or a MIP with nothing to start from) the option is left alone
     set_calls.clear()
-    sp._highs_solve(w, A, np.full(6, -np.inf), np.ones(6), np.ones(len(edges)), integer=True, time_limit=10.0)
+    H.highs_solve(w, A, np.full(6, -np.inf), np.ones(6), np.ones(len(edges)), integer=True, time_limit=10.0)
     assert not [c for c in set_calls if c[0] == "mip_heuristic_run_feasibility_jump"]
 
 
@@ -415,10 +415,10 @@ def test_lp_starts_from_keeping_every_polygon_and_reaches_the_cold_optimum(monke
     per polygon, and ends at the optimum HiGHS reaches from its own start."""
     import highspy
 
-    from shellmesh_mdao import split as sp
+    from shellmesh_mdao.core import highs as H
 
     runs = []
-    base = sp._highs_core(highspy)
+    base = H._highs_core(highspy)
 
     class Recording(base):
         basis_status = None
@@ -432,7 +432,7 @@ def test_lp_starts_from_keeping_every_polygon_and_reaches_the_cold_optimum(monke
             runs.append((self.basis_status, self.getInfo().simplex_iteration_count))
             return status
 
-    monkeypatch.setattr(sp, "_highs_core", lambda hp: Recording)
+    monkeypatch.setattr(H, "_highs_core", lambda hp: Recording)
     rng = np.random.default_rng(3)
     # a jittered 12 x 12 grid of quads with two columns stretched to 4:1: their quads gain
     # from a split, the others are best kept
@@ -447,7 +447,7 @@ def test_lp_starts_from_keeping_every_polygon_and_reaches_the_cold_optimum(monke
     assert warm_status == highspy.HighsStatus.kOk
     lp = build_split_lp(mesh)
     act = np.flatnonzero(lp.ub > 0)
-    cold = sp._highs_solve(lp.c[act], lp.A[:, act], lp.rhs, lp.rhs, lp.ub[act], integer=False, time_limit=10.0)
+    cold = H.highs_solve(lp.c[act], lp.A[:, act], lp.rhs, lp.rhs, lp.ub[act], integer=False, time_limit=10.0)
     cold_its = runs[-1][1]
     assert res.objective == pytest.approx(cold.objective, rel=1e-12)
     assert warm_its < cold_its / 3, (warm_its, cold_its)
@@ -457,19 +457,20 @@ def test_time_limited_lp_vertex_worse_than_keeping_is_not_used(monkeypatch):
     """Should the LP stop at its time limit on a vertex of higher energy than keeping every
     polygon, every polygon is kept and the status says why."""
     from shellmesh_mdao import split as sp
+    from shellmesh_mdao.core.highs import HighsResult
 
     pts, f = _grid(3, 3, 1.0, 1.0)
     mesh = ShellMesh(pts, f)
-    real = sp._highs_solve
+    real = sp.highs_solve
 
     def stopped(c, *a, **k):
         sol = real(c, *a, **k)
         worse = np.zeros_like(sol.x)
         worse[np.argmax(c)] = 1.0                  # costlier than the optimum, kept or not
         assert c @ worse > sol.objective
-        return sp._Solve(worse, "Time limit reached", float(c @ worse), 0.0, sol.seconds)
+        return HighsResult(worse, "Time limit reached", float(c @ worse), 0.0, sol.seconds)
 
-    monkeypatch.setattr(sp, "_highs_solve", stopped)
+    monkeypatch.setattr(sp, "highs_solve", stopped)
     out, res = split_polygons(mesh)
     assert "Time limit" in res.status and "kept all polygons" in res.status
     assert np.array_equal(out.faces, mesh.faces) and res.n_split_edges == 0
@@ -514,7 +515,7 @@ def _block_lp(sizes, seed):
 
 
 def test_independent_halves_share_no_row_and_keep_blocks_whole():
-    from shellmesh_mdao.split import _independent_halves
+    from shellmesh_mdao.core.highs import _independent_halves
 
     sizes = [40, 30, 12, 9, 5, 3, 1]
     c, A, lo, hi, ub = _block_lp(sizes, 0)
@@ -535,32 +536,32 @@ def test_independent_halves_share_no_row_and_keep_blocks_whole():
 def test_lp_in_halves_gives_the_one_piece_optimum_from_two_threads(monkeypatch):
     import threading
 
-    from shellmesh_mdao import split as sp
+    from shellmesh_mdao.core import highs as H
 
     c, A, lo, hi, ub = _block_lp([60, 50, 20, 15], 1)
-    one = sp._highs_solve(c, A, lo, hi, ub, integer=False, time_limit=10.0)
+    one = H.highs_solve(c, A, lo, hi, ub, integer=False, time_limit=10.0)
     threads = []
-    real = sp._highs_solve
+    real = H.highs_solve
 
     def recording(*a, **k):
         threads.append((threading.get_ident(), a[1].shape[1]))
         return real(*a, **k)
 
-    monkeypatch.setattr(sp, "_highs_solve", recording)
+    monkeypatch.setattr(H, "highs_solve", recording)
     # below LP_HALF_MIN columns in the smaller half: one piece, in the caller's thread
-    res = sp._highs_solve_halves(c, A, lo, hi, ub, time_limit=10.0)
+    res = H.highs_solve_halves(c, A, lo, hi, ub, time_limit=10.0)
     assert threads == [(threading.get_ident(), 145)]
     assert np.array_equal(res.x, one.x)
     threads.clear()
-    monkeypatch.setattr(sp, "LP_HALF_MIN", 20)
-    res = sp._highs_solve_halves(c, A, lo, hi, ub, time_limit=10.0)
+    monkeypatch.setattr(H, "LP_HALF_MIN", 20)
+    res = H.highs_solve_halves(c, A, lo, hi, ub, time_limit=10.0)
     assert sorted(k for _, k in threads) == [60, 85] and len({t for t, _ in threads}) == 2
     assert res.status == "Optimal" and res.mip_gap == 0.0
     assert np.allclose(res.x, one.x, atol=1e-9, rtol=0)
     assert res.objective == pytest.approx(one.objective, rel=1e-12) and res.dual_bound == res.objective
     # an infeasible half: no solution, HiGHS's status of that half
     lo2 = lo.copy()
-    (c0, r0), (c1, r1) = sp._independent_halves(A)
+    (c0, r0), (c1, r1) = H._independent_halves(A)
     lo2[r1[0]] = 1e6                         # a row of the second half that no x in [0, 1] meets
-    bad = sp._highs_solve_halves(c, A, lo2, np.maximum(hi, lo2), ub, time_limit=10.0)
+    bad = H.highs_solve_halves(c, A, lo2, np.maximum(hi, lo2), ub, time_limit=10.0)
     assert bad.x is None and bad.status == "Infeasible"

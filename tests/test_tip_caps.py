@@ -22,7 +22,7 @@ import stress_layouts as SL  # noqa: E402
 from shellmesh_mdao import pipeline as pl  # noqa: E402
 from shellmesh_mdao.layout import layout_from_manifest  # noqa: E402
 from shellmesh_mdao.quality import scaled_jacobian  # noqa: E402
-from shellmesh_mdao.smooth import SURFACE  # noqa: E402
+from shellmesh_mdao.core.supports import SURFACE  # noqa: E402
 from test_pipeline import check_guarantees  # noqa: E402
 
 

@@ -1,11 +1,12 @@
-"""Mesh topology helpers the stages share: the faces around a set of vertices, and rings of them."""
+"""Mesh topology helpers the stages share: the faces around a set of vertices, rings of them, and
+the mask of the edges that are given node pairs."""
 from __future__ import annotations
 
 import numpy as np
 
 from .kernels import faces_at
 
-__all__ = ["faces_of", "face_rings"]
+__all__ = ["faces_of", "face_rings", "fixed_edge_mask"]
 
 def faces_of(ptr, vf, verts, m):
     """Sorted ids of the faces incident to ``verts`` (CSR ``ptr``/``vf`` of ``m`` faces; a
@@ -21,3 +22,15 @@ def face_rings(faces, ptr, vf, verts, rings: int = 2):
         v = faces[region]
         region = faces_of(ptr, vf, np.unique(v[v >= 0]), len(faces))
     return region
+
+
+def fixed_edge_mask(topo, fixed_edges) -> np.ndarray:
+    """(E,) bool over the edges of ``topo`` (:meth:`~shellmesh_mdao.mesh.ShellMesh.topology`): True
+    on the edges given as node pairs ``fixed_edges`` (k, 2); pairs that are not edges are ignored.
+    The split and merge stages never split or merge across these (default: the feature edges)."""
+    mask = np.zeros(len(topo.edges), bool)
+    fe = np.asarray(fixed_edges, dtype=np.int64).reshape(-1, 2)
+    if len(fe) and len(topo.edges):
+        ids = topo.edge_ids(fe)
+        mask[ids[ids >= 0]] = True
+    return mask

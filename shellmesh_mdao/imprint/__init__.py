@@ -44,7 +44,7 @@ from .cut import SNAP_FALLBACK, ChainResult, chain_report, cut_chain, imprint_ch
 from .families import skin_families
 from .improve import improve_skin
 from .refine import chain_depths, coarsen_chains, refine_chains
-from .section import Plane, PlaneSection, SectionArc, plane_section, section_arc
+from ..core.section import Plane, PlaneSection, SectionArc, plane_section, section_arc
 from .specs import ChainSpec, chain_specs
 
 __all__ = ["ChainSpec", "ChainResult", "SNAP_FALLBACK", "chain_specs", "imprint_chains", "insert_point", "cut_chain",

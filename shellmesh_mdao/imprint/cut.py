@@ -14,7 +14,7 @@ from ..kernels import centroid_d2, chain_walk
 from ..mesh import ShellMesh, bbox_diagonal, cross_rows, norm_rows, reduce_short, unique_edges
 from .common import tri_angles_min
 from .crossings import arc_crossings, arc_feature_crossings
-from .section import SectionArc, plane_section, section_arc
+from ..core.section import SectionArc, plane_section, section_arc
 from .specs import ChainSpec
 
 __all__ = ["SNAP_FALLBACK", "ChainResult", "imprint_chains", "insert_point", "cut_chain", "chain_report",

@@ -11,7 +11,7 @@ from ..core.polygon import frame_from_normal, interior_samples, point_in_polygon
 from ..errors import ImprintError, LayoutError
 from ..layout import explicit_plane
 from ..mesh import norm_rows
-from .section import Plane
+from ..core.section import Plane
 
 __all__ = ["ChainSpec", "chain_specs"]
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import LayoutError
-from ..imprint.section import Plane
+from ..core.section import Plane
 from ..layout import Layout, explicit_plane, load_layout
 
 __all__ = ["MemberInfo", "member_infos", "fit_plane"]
