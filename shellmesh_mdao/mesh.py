@@ -27,7 +27,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from . import kernels as _k
+from .core import kernels as _k
 from .errors import MeshValidationError
 
 __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces",
@@ -576,7 +576,7 @@ def edge_topology(faces: np.ndarray) -> EdgeTopology:
 def vertex_faces(faces: np.ndarray, n_points: int) -> tuple[np.ndarray, np.ndarray]:
     """CSR list of the faces around each vertex of a face array ((m, 3) triangles or
     (m, 4) mixed, -1 padded): ``faces_of_v = idx[ptr[v]:ptr[v + 1]]`` (ascending face order)."""
-    from .kernels import vertex_faces as _compiled     # numba: imported on first use
+    from .core.kernels import vertex_faces as _compiled
     return _compiled(faces, n_points)
 
 

@@ -5,7 +5,8 @@ import pytest
 from scipy import sparse
 
 from shellmesh_mdao.core.kernels import greedy_independent, stable_order, stable_pair_order
-from shellmesh_mdao.kernels import ReducedHessian, closest_on_curves, min_corner_sj, ortho_gradient, ortho_jacobian
+from shellmesh_mdao.core.kernels import closest_on_curves
+from shellmesh_mdao.smooth.kernels import ReducedHessian, min_corner_sj, ortho_gradient, ortho_jacobian
 from shellmesh_mdao.remesh.kernels import common_neighbour_counts, greedy_independent_rings
 from shellmesh_mdao.mesh import cross_rows
 
@@ -331,7 +332,7 @@ def test_face_quality_matches_the_numpy_version(seed):
     array numpy formulas, bit for bit: random quads and triangles over six decades of scale, a
     zero-length edge, a degenerate element (zero normal: quality -1), flipped references,
     a reference normal with a NaN and one with a signed zero, corners with inf."""
-    from shellmesh_mdao.kernels import face_quality
+    from shellmesh_mdao.smooth.kernels import face_quality
     from shellmesh_mdao.smooth.elements import _TRI_SJ, oriented_quality
     rng = np.random.default_rng(700 + seed)
     m = 400
@@ -727,7 +728,7 @@ def test_triangle_angle_kernels_give_the_numpy_angles(k):
     """The remesh's and the imprint's triangle angles, from the compiled arguments and numpy's
     arctan2 / arccos, equal the whole-numpy formulas they replaced (every array length,
     since numpy's vector loops treat the tail of an array apart)."""
-    from shellmesh_mdao import kernels as K
+    from shellmesh_mdao.imprint import kernels as K
     from shellmesh_mdao.imprint.common import angles3
     from shellmesh_mdao.remesh.common import tri_angles as _tri_angles, tri_min_angle as _tri_min_angle
     from shellmesh_mdao.remesh.common import tri_normals as _tri_normals
@@ -1070,7 +1071,7 @@ def test_skin_flips_match_the_numpy_formulas(seed):
     mean normal), on a wavy, jittered grid with a tetrahedron beside it (whose flips would
     create existing edges), a folded corner and a node on top of its neighbour."""
     from shellmesh_mdao.core.kernels import edge_table
-    from shellmesh_mdao.kernels import corner_cosines, skin_flips
+    from shellmesh_mdao.imprint.kernels import corner_cosines, skin_flips
     from shellmesh_mdao.mesh import cross_rows, norm_rows
 
     rng = np.random.default_rng(seed)
@@ -1145,7 +1146,7 @@ def test_star_moves_match_the_numpy_formulas(seed):
     (gathers and np.where per corner, corner_cosines of the whole triangle set, np.einsum), on a
     wavy grid whose vertices move by up to two cells (some triangles turn over), one onto its
     neighbour."""
-    from shellmesh_mdao.kernels import corner_cosines, star_moves
+    from shellmesh_mdao.imprint.kernels import corner_cosines, star_moves
     from shellmesh_mdao.mesh import cross_rows, vertex_faces
 
     rng = np.random.default_rng(seed)
@@ -1284,7 +1285,7 @@ def test_edge_lookup_matches_the_sorted_keys(seed):
 def test_pair_difference_gives_the_bincount_bits():
     """pair_difference sums each pair's vector onto its first vertex minus onto its second
     vertex, as numpy's bincounts did, bit for bit (repeated vertices, signed zeros)."""
-    from shellmesh_mdao.kernels import pair_difference
+    from shellmesh_mdao.smooth.kernels import pair_difference
     rng = np.random.default_rng(12)
     n, k = 50, 3000
     i, j = rng.integers(0, n, k), rng.integers(0, n, k)
@@ -1301,7 +1302,7 @@ def test_corner_sums_and_max_turn_give_the_numpy_bits():
     """The smoothing's vertex normals and curvature: corner_sums is bincount of each face's
     vector over its valid corners, corner_max_turn is np.maximum.at of 1 - einsum's dot, bit
     for bit (triangles padded with -1, vertices without faces)."""
-    from shellmesh_mdao.kernels import corner_max_turn, corner_sums
+    from shellmesh_mdao.smooth.kernels import corner_max_turn, corner_sums
     rng = np.random.default_rng(21)
     n, m = 300, 500
     faces = np.array([rng.choice(n - 20, 4, replace=False) for _ in range(m)])
@@ -1323,7 +1324,7 @@ def test_corner_sums_and_max_turn_give_the_numpy_bits():
 
 def test_centroid_d2_gives_the_numpy_bits():
     """The imprint's nearest-centroid scan: the squared centroid distances of numpy's formula."""
-    from shellmesh_mdao.kernels import centroid_d2
+    from shellmesh_mdao.imprint.kernels import centroid_d2
     from shellmesh_mdao.mesh import reduce_short
     rng = np.random.default_rng(5)
     P = rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-4, 4, (400, 1))
@@ -1412,7 +1413,7 @@ def test_element_normals_and_faces_at_match_numpy(seed):
     ``cross_rows`` (quad diagonals, triangle sides) over ``dot_unit_rows``, degenerate
     elements zero; the faces at a set of vertices from a mask."""
     from shellmesh_mdao.core.kernels import faces_at
-    from shellmesh_mdao.kernels import element_normals
+    from shellmesh_mdao.smooth.kernels import element_normals
     from shellmesh_mdao.mesh import vertex_faces
     from shellmesh_mdao.smooth.elements import _corner_normals
     rng = np.random.default_rng(80 + seed)
@@ -1444,7 +1445,7 @@ def test_nearest_other_distance_gives_the_kd_trees_bits(case):
     point (inf) and a subset of query vertices, whatever the cell."""
     from scipy.spatial import cKDTree
 
-    from shellmesh_mdao.kernels import nearest_other_distance
+    from shellmesh_mdao.smooth.kernels import nearest_other_distance
 
     rng = np.random.default_rng(11)
     u = rng.random((3000, 2)) * [2 * np.pi, np.pi]
@@ -1493,7 +1494,7 @@ def _star_rounds_reference(order, ptr, star, ntri, rounds):
 def test_star_independent_matches_the_numpy_rounds(seed):
     """The imprint smoothing's independent set of moving vertices: the same vertices in the
     same order as the numpy rounds, no two taken vertices sharing a triangle."""
-    from shellmesh_mdao.kernels import star_independent
+    from shellmesh_mdao.imprint.kernels import star_independent
     from shellmesh_mdao.mesh import vertex_faces
 
     rng = np.random.default_rng(seed)

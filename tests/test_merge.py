@@ -8,7 +8,8 @@ import pytest
 import trimesh
 
 from shellmesh_mdao.mesh import ShellMesh
-from shellmesh_mdao.merge import _safe_reduction, merge_candidates, merge_triangles, quad_energy
+from shellmesh_mdao.merge import merge_candidates, merge_triangles, quad_energy
+from shellmesh_mdao.merge.triangles import _safe_reduction
 
 try:
     from shellmesh_mdao.quality import scaled_jacobian
@@ -357,7 +358,7 @@ def test_safe_reduction_rounds_match_the_numpy_rounds():
     """The compiled rounds (kernels.safe_matching_rounds) give the numpy rounds' masks on
     random graphs with repeated edges, tied weights (ranks then decide), isolated triangles
     and round limits; edges out of range are refused."""
-    from shellmesh_mdao.kernels import safe_matching_rounds
+    from shellmesh_mdao.merge.kernels import safe_matching_rounds
     rng = np.random.default_rng(6)
     for trial in range(300):
         n, k = int(rng.integers(2, 150)), int(rng.integers(1, 300))
@@ -489,7 +490,7 @@ def test_valence_merge_in_blocks(monkeypatch):
     # a problem above VALENCE_ONE_PIECE candidates is solved in blocks (the dual simplex grows
     # faster than the problem), each with the merges before it fixed: still a valid matching, the
     # same every time, close to the one-piece objective; no global bound, so the gap is NaN
-    import shellmesh_mdao.merge as M
+    import shellmesh_mdao.merge.triangles as M
     mesh = ShellMesh(*_delaunay_patch(2))
     one, r1 = merge_triangles(mesh, merge_bonus=1.0, valence_weight=0.5)
     monkeypatch.setattr(M, "VALENCE_ONE_PIECE", 100)

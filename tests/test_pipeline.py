@@ -506,7 +506,7 @@ def test_merge_report_is_strict_json_without_a_gap(monkeypatch):
     standard JSON."""
     import json
 
-    import shellmesh_mdao.merge as M
+    import shellmesh_mdao.merge.triangles as M
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="split").state
     monkeypatch.setattr(M, "VALENCE_ONE_PIECE", 500)
     monkeypatch.setattr(M, "VALENCE_BLOCK", 400)

@@ -155,7 +155,7 @@ def test_arc_kernels_match_the_scipy_graph_walk(seed):
     from scipy import sparse
     from scipy.sparse.csgraph import connected_components, depth_first_order
 
-    from shellmesh_mdao.kernels import arc_links, arc_order
+    from shellmesh_mdao.core.kernels import arc_links, arc_order
     rng = np.random.default_rng(60 + seed)
     nn = 80
     u, v = [], []

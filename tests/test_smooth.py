@@ -536,7 +536,7 @@ def test_warp_term_gradient_and_hessian_are_those_of_its_energy():
             fd[i, d] = (_warp_energy(term, P2 + e) - _warp_energy(term, P2 - e)) / (2 * eps)
     assert np.abs(g - fd).max() <= 1e-7 * max(1.0, np.abs(fd).max())
     # the Hessian the smoothing assembles (kernels.ReducedHessian), in full 3D columns
-    from shellmesh_mdao.kernels import ReducedHessian
+    from shellmesh_mdao.smooth.kernels import ReducedHessian
     none = np.zeros(0, np.int64)
     hess = ReducedHessian(none, none, F2, np.full(n, 3), 3 * np.arange(n))
     H = hess.matrix(hess.values(np.tile(np.eye(3), (n, 1)), np.zeros(0), np.zeros(3 * n), warp=term.terms())).toarray()
@@ -703,7 +703,7 @@ def test_trust_radius_query_in_its_own_thread():
     """The smoothing asks its trust radius (distance to the nearest other vertex) of a grid in a
     second thread: the distances are a brute-force scan's, coincident points give 0, and an
     exception in the thread reaches the caller."""
-    from shellmesh_mdao.kernels import nearest_other_distance
+    from shellmesh_mdao.smooth.kernels import nearest_other_distance
     from shellmesh_mdao.core.threads import Background
 
     rng = np.random.default_rng(5)

@@ -13,7 +13,8 @@ from numba import njit
 __all__ = ["by_resource", "first_wave", "next_wave", "dense_rank", "in_range", "check_index", "select",
            "greedy_independent", "chain_walk", "counting_order", "stable_order", "vertex_faces", "stable_pair_order",
            "edge_table", "edge_id", "edge_rows", "edge_lookup", "dot3", "clip01", "sq_dist", "dot3e", "faces_at",
-           "cross3", "norm3", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows"]
+           "cross3", "norm3", "cross_rows", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows", "arc_links",
+           "arc_order", "on_segment_ab", "segments_scan", "closest_on_curves"]
 
 
 # ============================================================================ independent sets
@@ -698,3 +699,252 @@ def dot_unit_rows(a):
     norm is not positive (``np.divide(a, n, out=zeros, where=n > 0)``); None otherwise."""
     a3 = _rows3(a)
     return None if a3 is None else _dot_unit_rows(a3)
+
+
+@njit(cache=True, nogil=True)
+def _incidence(u, v, nn):
+    """Per node the links at it, by rising link id (CSR)."""
+    ptr = np.zeros(nn + 1, np.int64)
+    for e in range(u.shape[0]):
+        ptr[u[e] + 1] += 1
+        ptr[v[e] + 1] += 1
+    for i in range(nn):
+        ptr[i + 1] += ptr[i]
+    inc = np.empty(ptr[nn], np.int64)
+    fill = ptr[:nn].copy()
+    for e in range(u.shape[0]):
+        inc[fill[u[e]]] = e
+        fill[u[e]] += 1
+        inc[fill[v[e]]] = e
+        fill[v[e]] += 1
+    return ptr, inc
+
+
+@njit(cache=True, nogil=True)
+def _link_component(u, v, nn, best):
+    ptr, inc = _incidence(u, v, nn)
+    seen_node = np.zeros(nn, np.bool_)
+    in_comp = np.zeros(u.shape[0], np.bool_)
+    stack = np.empty(nn, np.int64)
+    stack[0] = u[best]
+    seen_node[u[best]] = True
+    top = 1
+    while top > 0:
+        top -= 1
+        x = stack[top]
+        for p in range(ptr[x], ptr[x + 1]):
+            e = inc[p]
+            in_comp[e] = True
+            y = v[e] if u[e] == x else u[e]
+            if not seen_node[y]:
+                seen_node[y] = True
+                stack[top] = y
+                top += 1
+    return in_comp
+
+
+@njit(cache=True, nogil=True)
+def _arc_order(lu, lv, nn, start):
+    # each node's neighbours by rising id, a repeated link once with the sum of its ids + 1
+    # (the symmetric CSR matrix of the links' ids + 1, as scipy builds and sums it)
+    L = lu.shape[0]
+    lo = np.empty(2 * L, np.int64)
+    hi = np.empty(2 * L, np.int64)
+    val = np.empty(2 * L, np.int64)
+    for e in range(L):
+        lo[2 * e], hi[2 * e], val[2 * e] = lu[e], lv[e], e + 1
+        lo[2 * e + 1], hi[2 * e + 1], val[2 * e + 1] = lv[e], lu[e], e + 1
+    key = lo * nn + hi
+    o = np.argsort(key, kind="mergesort")
+    ptr = np.zeros(nn + 1, np.int64)
+    nbr = np.empty(2 * L, np.int64)
+    w = np.empty(2 * L, np.int64)
+    m = 0
+    for t in range(2 * L):
+        i = o[t]
+        if m > 0 and t > 0 and key[o[t - 1]] == key[i]:
+            w[m - 1] += val[i]
+            continue
+        nbr[m], w[m] = hi[i], val[i]
+        ptr[lo[i] + 1] += 1
+        m += 1
+    for i in range(nn):
+        ptr[i + 1] += ptr[i]
+    # depth-first order from start, the lowest unvisited neighbour first (scipy's walk)
+    seen = np.zeros(nn, np.bool_)
+    order = np.empty(nn, np.int64)
+    seg = np.empty(nn, np.int64)
+    root = np.empty(nn, np.int64)
+    order[0] = start
+    seen[start] = True
+    root[0] = start
+    r = 0
+    k = 1
+    while r >= 0:
+        x = root[r]
+        moved = False
+        for p in range(ptr[x], ptr[x + 1]):
+            y = nbr[p]
+            if not seen[y]:
+                seen[y] = True
+                if order[k - 1] == x:
+                    seg[k - 1] = w[p] - 1
+                else:                      # after a dead end: the matrix entry of the two nodes
+                    seg[k - 1] = -1
+                    z = order[k - 1]
+                    for q in range(ptr[z], ptr[z + 1]):
+                        if nbr[q] == y:
+                            seg[k - 1] = w[q] - 1
+                order[k] = y
+                k += 1
+                r += 1
+                root[r] = y
+                moved = True
+                break
+        if not moved:
+            r -= 1
+    return order[:k], seg[:k - 1]
+
+
+def arc_links(u, v, nn, best):
+    """The links ``(u[e], v[e])`` (node ids in [0, nn)) connected to link ``best``: a bool
+    mask (a walk over the links at each node)."""
+    u, v = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (u, v))
+    if len(u) != len(v) or not (0 <= int(best) < len(u)):
+        raise ValueError("arc_links needs as many u as v and best among them")
+    check_index("u", u, int(nn))
+    check_index("v", v, int(nn))
+    return _link_component(u, v, int(nn), int(best))
+
+
+def arc_order(lu, lv, nn, start):
+    """The depth-first order of the graph of the links ``(lu[e], lv[e])`` from node ``start``,
+    the lowest unvisited neighbour first (scipy's ``depth_first_order`` on the symmetric link
+    matrix), and for each pair of consecutive nodes of that order the link between them: the
+    entry of the symmetric matrix of link ids + 1, minus 1 (a link repeated between two nodes
+    gives the sum of their ids + 1, minus 1; two nodes without a link -1), as
+    ``section.section_arc`` read it from that matrix."""
+    lu, lv = (np.ascontiguousarray(x, dtype=np.int64).reshape(-1) for x in (lu, lv))
+    if len(lu) != len(lv):
+        raise ValueError("arc_order needs as many lu as lv")
+    check_index("lu", lu, int(nn))
+    check_index("lv", lv, int(nn))
+    check_index("start", np.array([int(start)]), int(nn))
+    return _arc_order(lu, lv, int(nn), int(start))
+
+
+# ============================================================================ segments
+@njit(cache=True, nogil=True, inline="always")
+def on_segment_ab(q0, q1, q2, a, ab, s):
+    """Closest point of segment ``s`` (``a[s] + t ab[s]``) to ``q``: ``(t, x0, x1, x2, distance)``
+    in the arithmetic of ``imprint._pick_segments`` (einsum's dot products, ``np.clip``, a t
+    of 0 on a zero-length segment, row norms)."""
+    a0, a1, a2 = a[s, 0], a[s, 1], a[s, 2]
+    e0, e1, e2 = ab[s, 0], ab[s, 1], ab[s, 2]
+    L2 = dot3e(e0, e1, e2, e0, e1, e2)
+    t = clip01(dot3e(q0 - a0, q1 - a1, q2 - a2, e0, e1, e2) / (L2 if L2 > 0 else 1.0))
+    x0, x1, x2 = a0 + t * e0, a1 + t * e1, a2 + t * e2
+    return t, x0, x1, x2, np.sqrt(sq_dist(x0, x1, x2, q0, q1, q2))
+
+
+@njit(cache=True, nogil=True)
+def _segments_scan(q, lo, hi, a, ab):
+    m = q.shape[0]
+    x = np.empty((m, 3))
+    dist = np.empty(m)
+    seg = np.empty(m, np.int64)
+    tt = np.empty(m)
+    for i in range(m):
+        q0, q1, q2 = q[i, 0], q[i, 1], q[i, 2]
+        bs = -1
+        bd = np.inf
+        bt = 0.0
+        b0 = b1 = b2 = 0.0
+        for s in range(lo[i], hi[i]):
+            t, x0, x1, x2, d = on_segment_ab(q0, q1, q2, a, ab, s)
+            # the nearest, the lowest segment among equals; NaN distances last (np.lexsort)
+            if bs < 0 or d < bd or (bd != bd and d == d):
+                bs, bd, bt = s, d, t
+                b0, b1, b2 = x0, x1, x2
+        x[i, 0], x[i, 1], x[i, 2] = b0, b1, b2
+        dist[i] = bd
+        seg[i] = bs
+        tt[i] = bt
+    return x, dist, seg, tt
+
+
+def segments_scan(q, lo, hi, a, ab):
+    """The closest point to each query ``q[i]`` on the segments ``a[s] + t ab[s]``,
+    ``lo[i] <= s < hi[i]`` (a non-empty range), scanning them all: ``(points, distances,
+    segments, t)``, the nearest segment and the lowest among equally near ones, with
+    numpy's arithmetic of ``imprint._pick_segments`` (einsum's dot products, ``np.clip``,
+    row norms), so the same bits as that pick over any candidate set holding the nearest."""
+    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    ab = np.ascontiguousarray(ab, dtype=np.float64).reshape(-1, 3)
+    lo = np.ascontiguousarray(lo, dtype=np.int64).reshape(-1)
+    hi = np.ascontiguousarray(hi, dtype=np.int64).reshape(-1)
+    if len(a) != len(ab) or len(lo) != len(q) or len(hi) != len(q):
+        raise ValueError("segments_scan needs one a and one ab per segment and one range per query")
+    if len(q) and ((lo < 0).any() or (hi > len(a)).any() or (hi <= lo).any()):
+        raise ValueError(f"segment ranges must be non-empty and lie in [0, {len(a)}]")
+    return _segments_scan(q, lo, hi, a, ab)
+
+
+# ============================================================================ curves
+@njit(cache=True, nogil=True, error_model="numpy")
+def _closest_on_curves(q, cid, start, stop, a, ab, L):
+    k = q.shape[0]
+    X = np.empty((k, 3))
+    D = np.empty(k)
+    S = np.empty(k, np.int64)
+    for i in range(k):
+        q0, q1, q2 = q[i, 0], q[i, 1], q[i, 2]
+        best, bs = np.inf, -1
+        bx0 = bx1 = bx2 = np.nan
+        for s in range(start[cid[i]], stop[cid[i]]):
+            f0, f1, f2 = q0 - a[s, 0], q1 - a[s, 1], q2 - a[s, 2]
+            if best < np.inf:
+                # every point of the segment is within L[s] of a[s]: one farther than best + L[s]
+                # (with a slack far above the rounding) cannot be nearer nor tie
+                r = best + L[s]
+                if f0 * f0 + f1 * f1 + f2 * f2 > r * r * (1.0 + 1e-9) + 1e-300:
+                    continue
+            t = dot3(f0, f1, f2, ab[s, 0], ab[s, 1], ab[s, 2])
+            t = clip01(t / (L[s] * L[s]))
+            x0, x1, x2 = a[s, 0] + t * ab[s, 0], a[s, 1] + t * ab[s, 1], a[s, 2] + t * ab[s, 2]
+            e0, e1, e2 = x0 - q0, x1 - q1, x2 - q2
+            d = np.sqrt(dot3(e0, e1, e2, e0, e1, e2))
+            # nearest, then the lowest segment; a NaN distance (a zero-length segment) only
+            # when nothing else is there, as lexsort puts NaN last
+            if bs < 0 or d < best or (best != best and d == d):
+                best, bs = d, s
+                bx0, bx1, bx2 = x0, x1, x2
+        X[i, 0], X[i, 1], X[i, 2] = bx0, bx1, bx2
+        D[i] = best
+        S[i] = bs
+    return X, D, S
+
+
+def closest_on_curves(q, cid, start, stop, a, ab, L):
+    """Closest point of each query ``q[i]`` (k, 3) on the polyline ``cid[i]``, whose segments
+    are ``a[s] + t ab[s]``, ``0 <= t <= 1``, of length ``L[s]``, for ``s`` in
+    ``start[cid[i]] .. stop[cid[i]] - 1``. Returns ``(points (k, 3), distances (k,), segments
+    (k,))``: over every segment of the polyline, the nearest, then the lowest segment index;
+    the same bits as the numpy formulas of :func:`~shellmesh_mdao.smooth._pick_nearest` over
+    any set of candidates that holds the nearest segments. ``L`` must be the segments' lengths
+    (``norm(ab)``): a segment whose start is farther than the best distance so far plus its
+    length is skipped."""
+    q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
+    cid = np.ascontiguousarray(cid, dtype=np.int64).reshape(-1)
+    start = np.ascontiguousarray(start, dtype=np.int64)
+    stop = np.ascontiguousarray(stop, dtype=np.int64)
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    ab = np.ascontiguousarray(ab, dtype=np.float64).reshape(-1, 3)
+    L = np.ascontiguousarray(L, dtype=np.float64).reshape(-1)
+    if len(cid) != len(q) or len(stop) != len(start) or len(ab) != len(a) or len(L) != len(a):
+        raise ValueError("closest_on_curves: q/cid, start/stop and a/ab/L must have matching lengths")
+    check_index("cid", cid, len(start))
+    if len(start) and ((start < 0).any() or (stop > len(a)).any() or (stop <= start).any()):
+        raise ValueError(f"every curve needs a non-empty segment range within 0..{len(a)}")
+    return _closest_on_curves(q, cid, start, stop, a, ab, L)

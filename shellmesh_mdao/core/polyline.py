@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..kernels import segments_scan
+from .kernels import segments_scan
 from ..mesh import norm_rows
 
 __all__ = ["SCAN_WORK", "closest_on_segments", "pick_segments", "closest_on_polyline", "arc_param", "arc_point",

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ImprintError
-from ..kernels import arc_links, arc_order
+from .kernels import arc_links, arc_order
 from ..mesh import bbox_diagonal, norm_rows
 
 __all__ = ["Plane", "PlaneSection", "plane_section", "section_arc", "SectionArc"]

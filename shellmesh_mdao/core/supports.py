@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import MeshValidationError, ProjectionError
-from ..kernels import chain_walk, closest_on_curves
+from .kernels import chain_walk, closest_on_curves
 from ..mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, unique_edges
 from ..project import SurfaceLocator, closest_point_on_triangles
 

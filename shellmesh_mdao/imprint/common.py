@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import corner_cosines
+from .kernels import corner_cosines
 from ..mesh import norm_rows
 
 __all__ = ["tri_angles_min", "angles3", "min_angle_from_cos", "min_angles_small", "unit_normals", "ranges",

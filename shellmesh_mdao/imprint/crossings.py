@@ -7,7 +7,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.polyline import SCAN_WORK, closest_on_polyline
-from ..kernels import segments_within
+from .kernels import segments_within
 from ..mesh import ShellMesh, norm_rows
 from .common import ranges
 

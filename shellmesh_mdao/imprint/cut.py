@@ -10,7 +10,8 @@ from scipy.spatial import cKDTree
 
 from ..core.polyline import arc_param, closest_on_polyline, sub_polyline
 from ..errors import ImprintError
-from ..kernels import centroid_d2, chain_walk
+from ..core.kernels import chain_walk
+from .kernels import centroid_d2
 from ..mesh import ShellMesh, bbox_diagonal, cross_rows, norm_rows, reduce_short, unique_edges
 from .common import tri_angles_min
 from .crossings import arc_crossings, arc_feature_crossings

@@ -7,7 +7,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..core.polyline import SCAN_WORK, pick_segments
-from ..kernels import edge_lookup, edge_rows, edge_table, segments_scan, skin_flips, star_independent, star_moves
+from ..core.kernels import edge_lookup, edge_rows, edge_table, segments_scan
+from .kernels import skin_flips, star_independent, star_moves
 from ..mesh import ShellMesh, cross_rows, norm_rows, vertex_faces
 from .common import min_angle_from_cos, min_angles_small, ranges, tri_angles_min
 from .repair import CHAIN, FREE, SkinPatch, skin_roles

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.polyline import closest_on_polyline
-from ..kernels import greedy_independent
+from ..core.kernels import greedy_independent
 from ..mesh import ShellMesh, norm_rows, unique_edges, vertex_faces
 from .common import edge_keys, has_edge, min_angles_small, polyline_param, ranges, unit_normals
 from .cut import split_feature_edges, split_hanging

@@ -9,8 +9,8 @@ from ..core.polygon import frame_from_normal, interior_samples, point_in_polygon
 from ..errors import ImprintError, LayoutError, SizeError
 from ..mesh import ShellMesh, norm_rows
 from .info import MemberInfo
-from .junctions import (chain_edge_len, classify_junctions, end_spacing, exact_junction_vertices, find_junctions,
-                        gather_members, orient_chains, outline_nodes)
+from .junctions import (MemberChains, chain_edge_len, classify_junctions, end_spacing, exact_junction_vertices,
+                        find_junctions, gather_members, orient_chains, outline_nodes)
 from .meshing import DEFAULT_MIN_ANGLE, connected_pieces, mesh_coons, mesh_panels, mesh_planar_region
 from .spacing import relax_chain_spacing, split_thin_chain_edges
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ..core.supports import PLANE, Supports
-from ..kernels import element_normals, face_quality, min_corner_sj
+from .kernels import element_normals, face_quality, min_corner_sj
 from ..mesh import ShellMesh, cross_rows, dot_unit_rows, norm_rows
 
 __all__ = ["face_normals", "element_min_sj", "oriented_quality", "draped_vertices", "tangent_basis",

@@ -9,7 +9,7 @@ import numpy as np
 from scipy import sparse
 
 from ..core.supports import CURVE, PLANE, SURFACE, Supports
-from ..kernels import corner_max_turn, corner_sums, ortho_gradient, ortho_jacobian
+from .kernels import corner_max_turn, corner_sums, ortho_gradient, ortho_jacobian
 from ..mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
 from ..quality import warp
 from .elements import draped_vertices, tangent_basis

@@ -13,7 +13,7 @@ from ..core.supports import Supports, support_normals
 from ..core.threads import Background
 from ..core.topology import faces_of
 from ..errors import MeshValidationError
-from ..kernels import ReducedHessian, nearest_other_distance, pair_difference
+from .kernels import ReducedHessian, nearest_other_distance, pair_difference
 from ..mesh import ShellMesh, dot_norm_rows, dot_unit_rows, edge_topology, vertex_faces
 from .elements import element_min_sj, face_normals, mesh_figures
 from .energy import OrthoTerm, WarpTerm, energy_pairs, tangent_frames, vertex_normals_and_curvature

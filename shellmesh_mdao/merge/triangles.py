@@ -1,4 +1,4 @@
-"""Merging optimisation (Li & Hwang, paper Sec. IV.C.2, eq. 4-5).
+"""Merging optimisation (Li & Hwang, paper Sec. IV.C.2, eq. 4-5): candidates, energies, the MIP and the merge stage.
 
 One binary variable per candidate edge (an edge shared by exactly two triangles of
 the same component, not fixed, whose merged quad passes the shape guards); at most
@@ -36,13 +36,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import sparse
 
-from .core.highs import highs_solve, highs_solve_halves
-from .core.supports import PLANE, SURFACE, Supports, pipeline_supports, supports_hold
-from .core.topology import fixed_edge_mask
-from .errors import MeshValidationError
+from ..core.highs import highs_solve, highs_solve_halves
+from ..core.supports import PLANE, SURFACE, Supports, pipeline_supports, supports_hold
+from ..core.topology import fixed_edge_mask
+from ..errors import MeshValidationError
 from .kernels import safe_matching_rounds
-from .mesh import ShellMesh, norm_rows
-from .split import polygon_energy
+from ..mesh import ShellMesh, norm_rows
+from ..split import polygon_energy
 
 __all__ = ["MergeResult", "interior_vertices", "merge_candidates", "merge_triangles", "merge_mesh", "quad_energy"]
 
@@ -464,7 +464,7 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
     # safety: a triangle in two merges would make a pentagon
     used = np.bincount(np.concatenate([f0[take], f1[take]]), minlength=m)
     if (used > 1).any():
-        from .errors import SolverError
+        from ..errors import SolverError
         raise SolverError(f"merge solution uses {int((used > 1).sum())} triangles twice "
                           f"(status {status}); report this with the input mesh")
     faces = mesh.faces.copy()
