@@ -20,14 +20,15 @@ install-system:
 	    || ! ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || ! command -v mpirun >/dev/null 2>&1; then \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(SYSTEM_PACKAGES) >/dev/null; fi
 
-# the last line compiles the numba kernels once (about 45 s; cached next to the package), so that the first
-# run does not pay for it
+# -c constraints.txt: the exact versions the tests passed with (pyproject.toml has ranges). The last line
+# compiles the numba kernels once (about 45 s; cached next to the package), so that the first run does not
+# pay for it
 install: install-system
-	$(PYTHON) -m pip install --quiet -e .
+	$(PYTHON) -m pip install --quiet -e . -c constraints.txt
 	$(PYTHON) -c "import shellmesh_mdao.kernels as k; k.warm_up()"
 
 install-test: install-system
-	$(PYTHON) -m pip install --quiet -e ".[test]"
+	$(PYTHON) -m pip install --quiet -e ".[test]" -c constraints.txt
 	$(PYTHON) -c "import shellmesh_mdao.kernels as k; k.warm_up()"
 
 demo: install

@@ -37,9 +37,6 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
 import numpy as np  # noqa: E402
 import openmdao.api as om  # noqa: E402
 
@@ -196,7 +193,7 @@ def main(argv=None) -> int:
     rank, nproc = (comm.rank, comm.size) if comm is not None else (0, 1)
     if args.parallel and (MPI is None or nproc < 2):
         print("--parallel needs mpi4py and at least 2 processes: mpirun -n 2 python run_scripts/doe_rib_sweep.py "
-              "--parallel (install: apt-get install -y openmpi-bin libopenmpi-dev; pip install mpi4py)",
+              "--parallel (install: apt-get install -y openmpi-bin libopenmpi-dev; pip install -e \".[mpi]\")",
               file=sys.stderr)
         return 2
     if not args.parallel and nproc > 1:

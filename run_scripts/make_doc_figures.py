@@ -18,13 +18,12 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from shellmesh_mdao.geometry import naca_wing, naca_wing_layout  # noqa: E402
-from shellmesh_mdao.pipeline import run_pipeline  # noqa: E402
-from shellmesh_mdao.quality import element_quality  # noqa: E402
-from shellmesh_mdao.render import render_mesh, render_worst, render_worst_closeups  # noqa: E402
-from shellmesh_mdao.report import layout_up, write_histograms  # noqa: E402
+from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
+from shellmesh_mdao.pipeline import run_pipeline
+from shellmesh_mdao.quality import element_quality
+from shellmesh_mdao.render import render_mesh, render_worst, render_worst_closeups
+from shellmesh_mdao.report import layout_up, write_histograms
 
 WINDOW = (1000, 625)
 

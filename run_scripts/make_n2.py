@@ -17,16 +17,15 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-import openmdao.api as om  # noqa: E402
+import openmdao.api as om
 
-from shellmesh_mdao.analysis import find_ccx  # noqa: E402
-from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis  # noqa: E402
-from shellmesh_mdao.components.group import ShellMeshGroup  # noqa: E402
-from shellmesh_mdao.components.mass_comp import MassComp  # noqa: E402
-from shellmesh_mdao.errors import SolverError  # noqa: E402
-from shellmesh_mdao.geometry import naca_wing, naca_wing_layout  # noqa: E402
+from shellmesh_mdao.analysis import find_ccx
+from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis
+from shellmesh_mdao.components.group import ShellMeshGroup
+from shellmesh_mdao.components.mass_comp import MassComp
+from shellmesh_mdao.errors import SolverError
+from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 
 
 def build_model(with_analysis: bool = True) -> om.Problem:

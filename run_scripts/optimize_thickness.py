@@ -32,15 +32,12 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+import numpy as np
+import openmdao.api as om
 
-import numpy as np  # noqa: E402
-import openmdao.api as om  # noqa: E402
-
-from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis  # noqa: E402
-from shellmesh_mdao.components.group import ShellMeshGroup, family_names  # noqa: E402
-from shellmesh_mdao.geometry import naca_wing, naca_wing_layout  # noqa: E402
+from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis
+from shellmesh_mdao.components.group import ShellMeshGroup, family_names
+from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 
 #: Thickness groups: name -> fnmatch patterns of the families in the group (first match wins).
 GROUPS = {"skin": ["skin"], "upper_skin": ["*/upper_skin/*"], "lower_skin": ["*/lower_skin/*"],

@@ -28,17 +28,14 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+import numpy as np
+import openmdao.api as om
 
-import numpy as np  # noqa: E402
-import openmdao.api as om  # noqa: E402
-
-from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis  # noqa: E402
-from shellmesh_mdao.components.group import ShellMeshGroup  # noqa: E402
-from shellmesh_mdao.components.mass_comp import MassComp  # noqa: E402
-from shellmesh_mdao.errors import ShellMeshError  # noqa: E402
-from shellmesh_mdao.geometry import naca_wing, naca_wing_layout  # noqa: E402
+from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis
+from shellmesh_mdao.components.group import ShellMeshGroup
+from shellmesh_mdao.components.mass_comp import MassComp
+from shellmesh_mdao.errors import ShellMeshError
+from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 
 STEM = "default_wing"
 

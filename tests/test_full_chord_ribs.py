@@ -14,25 +14,18 @@ section, leading edge to trailing edge), issue 8.
 """
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from shellmesh_mdao import pipeline as pl
+from shellmesh_mdao.benchmarks import stress as SL
 from shellmesh_mdao.errors import ProjectionError
+from shellmesh_mdao.guarantees import check_guarantees
 from shellmesh_mdao.imprint import chain_specs, imprint_chains
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.members.spacing import split_thin_chain_edges
 from shellmesh_mdao.project import project_layout, project_wing_stations
 from shellmesh_mdao.quality import element_quality
-
-from test_pipeline import check_guarantees
-
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "run_scripts"))
-import stress_layouts as SL  # noqa: E402
 
 
 def _surface(geometry_dir, manifest, name):
@@ -152,7 +145,7 @@ def test_split_thin_keeps_fans_at_a_fixed_apex_open():
 
 
 def _run_draw(geometry_dir, manifest, seed, geometry, options=None):
-    c = SL.draw_case(seed, geometry, manifest=manifest)
+    c = SL.draw_case(seed, geometry, manifest=manifest, geometry_dir=geometry_dir)
     lay = layout_from_manifest(manifest, geometry, ribs=list(c["ribs"]), spars=list(c["spars"]))
     res = pl.run_pipeline(geometry_dir / manifest["geometries"][geometry]["file"], lay, c["size"], progress=False,
                           options=options)
@@ -201,7 +194,7 @@ def test_cessna_one_spar_trailing_edge_members(geometry_dir, manifest):
     of the wedge 0.2 to 0.08 tall and 0.41 long whose long lower side cannot be fanned, the skin
     angle opposite it being 20 degrees.)"""
     from shellmesh_mdao.members.meshing import tri_min_angles
-    c = SL.draw_case(89, "cessna210", manifest=manifest)
+    c = SL.draw_case(89, "cessna210", manifest=manifest, geometry_dir=geometry_dir)
     lay = layout_from_manifest(manifest, "cessna210", ribs=list(c["ribs"]), spars=list(c["spars"]))
     res = pl.run_pipeline(geometry_dir / manifest["geometries"]["cessna210"]["file"], lay, c["size"],
                           until="members", progress=False)

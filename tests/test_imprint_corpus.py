@@ -107,10 +107,7 @@ def test_imprint_redoes_a_cut_that_misses_its_crossing(geometry_dir, manifest):
     ends one vertex off it; the imprint finds the crossing missing and redoes that one cut at
     ``SNAP_FALLBACK`` (0.25). Without the fallback the members stage refused the layout ("meet on one
     skin side only")."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "run_scripts"))
-    import stress_layouts as SL
+    from shellmesh_mdao.benchmarks import stress as SL
     case = SL.draw_case(139, "swept_wing", manifest=manifest, geometry_dir=geometry_dir)
     lay = layout_from_manifest(manifest, "swept_wing", ribs=list(case["ribs"]), spars=list(case["spars"]))
     opts = {"snap": 0.4}

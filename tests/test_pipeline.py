@@ -17,6 +17,7 @@ import pytest
 from shellmesh_mdao import pipeline as pl
 from shellmesh_mdao.errors import ShellMeshError
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
+from shellmesh_mdao.guarantees import check_guarantees
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.quality import element_quality, scaled_jacobian
 from shellmesh_mdao.core.supports import CURVE, FIXED, PLANE, SURFACE
@@ -43,78 +44,10 @@ def run_small(spars):
     return _CACHE[key]
 
 
-def is_member(mesh, infos):
-    """Per face: True for member faces (components named after a member, or its /seg_<j> pieces)."""
-    members = {m.name for m in infos}
-    names = np.array([c.split("/seg_")[0] in members for c in mesh.component_names])
-    return names[mesh.component]
-
-
-def check_guarantees(res, input_closed=True, min_sj=0.2, free_edges=False, max_fixed=0.05):
-    """The properties every final mesh must have; returns the element-quality arrays.
-    ``min_sj``: every element's scaled Jacobian is above it (0.2 for layouts whose member
-    curves cross at reasonable angles; two curves crossing at an angle a leave a corner of a).
-    ``free_edges``: members may have free edges (an explicit member's straight end line inside
-    the wing, attached to nothing)."""
-    q = res.mesh
-    assert res.stage == "quad"
-    assert q.n_faces > 0 and q.n_tris == 0, "the final mesh is all quads"
-    eq = element_quality(q.points, q.faces)
-    sj = eq["scaled_jacobian"]
-    assert sj.min() > min_sj, f"{int((sj <= min_sj).sum())} elements with scaled Jacobian <= {min_sj} (min {sj.min():.3f})"
-    poor = np.flatnonzero(sj <= 0.2)
-    assert res.report["poor_elements"]["count"] == len(poor), "every element at or below 0.2 is reported"
-    assert res.report["poor_elements"]["elements"] == poor[:100].tolist()
-    chk = q.check()
-    assert len(chk.duplicate_points) == 0, "duplicate points (within 1e-9 of the diagonal)"
-    assert len(chk.hanging_nodes) == 0, "hanging nodes"
-    assert len(chk.degenerate_faces) == 0 and len(chk.unreferenced_points) == 0
-    mem = is_member(q, res.state.infos)
-    skin = q.submesh(~mem)
-    if input_closed:
-        assert len(skin.boundary_edges()) == 0, "the skin is closed where the input was"
-    # junctions: every member boundary edge is shared with the skin or another member
-    topo = q.topology()
-    fe = q.feature_edges[q.feature_edge_ids >= 0]
-    eid = topo.edge_ids(fe)
-    assert (eid >= 0).all(), "every member feature edge is a mesh edge"
-    val = topo.valence[eid]
-    assert set(np.unique(val).tolist()) <= ({1, 2, 3, 4} if free_edges else {2, 3, 4})
-    if not free_edges:
-        assert len(q.boundary_edges()) == 0, "no free member edge: each member boundary is a junction"
-    # every node on its support
-    sup = res.state.supports
-    tol = 1e-6 * q.diagonal
-    d = sup.distance(q.points)
-    assert d[sup.kind == PLANE].max(initial=0) <= 1e-9 * q.diagonal
-    # skin nodes lie on the input; the subdivision's fold guard keeps new nodes at their linear
-    # position where projecting them folds a child, and its settle step projects them and repairs
-    # the elements around; where that repair stalls (a crease much tighter than the element
-    # size) a few may stay at their linear position
-    # size); planarize then moves free skin nodes around quads warped above 10 degrees off the
-    # input on purpose, by at most planar_offset * size, and reports how many
-    ds = d[sup.kind == SURFACE]
-    off, planar = res.report["off_surface"], res.report["planarize"]
-    bound = res.state.options.planar_offset * res.state.size
-    moved = planar["moved"] if planar else 0
-    assert planar is None or planar["max_offset"] <= bound * (1 + 1e-12)
-    if not moved:
-        assert off["count"] == int((ds > tol).sum()), "every skin node off the input is reported"
-        assert np.isclose(off["max_distance"], ds.max(initial=0.0), rtol=1e-9, atol=1e-12)
-    else:
-        # the nodes off by more than tol: those left off before planarize plus those it moved
-        assert off["count"] <= int((ds > tol).sum()) <= off["count"] + moved
-        assert ds.max(initial=0.0) <= max(off["max_distance"], bound) + tol
-        assert planar["quads_above_after"] < planar["quads_above_before"]
-    assert (ds <= tol).mean() >= 0.995 - moved / max(len(ds), 1) and ds.max() <= 5e-3 * q.diagonal
-    assert (sup.kind == FIXED).sum() < max_fixed * q.n_points
-    return eq
-
-
 @pytest.mark.parametrize("spars", [(0.15, 0.65), (0.15, 0.4, 0.65)])
 def test_small_wing_all_quad_conforming(spars):
     res = run_small(spars)
-    eq = check_guarantees(res)
+    eq = check_guarantees(res)["quality"]
     q = res.mesh
     topo = q.topology()
     fe = q.feature_edges[q.feature_edge_ids >= 0]
@@ -566,7 +499,7 @@ def test_explicit_members_to_all_quads():
 
     surface = naca_wing()
     res = pl.run_pipeline(surface, wing_with_explicit_members(surface), WING_SIZE, progress=False)
-    eq = check_guarantees(res, min_sj=0.1, free_edges=True, max_fixed=0.15)   # non-planar members are fixed
+    eq = check_guarantees(res, min_sj=0.1, free_edges=True, max_fixed=0.15)["quality"]   # non-planar members fixed
     assert (eq["scaled_jacobian"] <= 0.2).sum() <= 5
     names = {res.mesh.component_names[i].split("/seg_")[0] for i in np.unique(res.mesh.component)}
     explicit = {m.name for m in res.layout.members() if m.kind == "explicit"}

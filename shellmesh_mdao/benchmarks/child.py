@@ -1,0 +1,62 @@
+"""A function call in a fresh child process, with a time limit: a hang or a crash is a result.
+
+The benchmark and the stress sweep run every case through :func:`run_in_child`: each in a new
+process started with ``multiprocessing``'s "spawn" method, so a case that hangs (it is killed at
+the time limit) or crashes (Gmsh, a segfault) is recorded instead of stopping the run, and the
+peak resident memory of each case (``ru_maxrss`` of its child) is its own. The function run must
+be importable by module name in the child (a module-level function of an installed module).
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import resource
+import time
+
+__all__ = ["run_in_child"]
+
+
+def _child(conn, fn, args, kwargs):
+    try:
+        out = fn(*args, **kwargs)
+        out["status"] = "ok"
+    except BaseException as e:  # noqa: BLE001 -- report any failure of the case, never raise
+        out = {"status": "error", "error": f"{type(e).__name__}: {e}"}
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    out["peak_rss_mb"] = ru.ru_maxrss / 1024.0         # Linux: kilobytes
+    out["child_cpu_s"] = ru.ru_utime + ru.ru_stime
+    conn.send(out)
+    conn.close()
+
+
+def run_in_child(fn, *args, timeout: float = 3600.0, **kwargs) -> dict:
+    """Call ``fn(*args, **kwargs)`` (module-level, returning a dict) in a fresh spawned process
+    with a time limit. Returns its dict with ``status`` "ok", ``peak_rss_mb`` (peak resident
+    memory of the child, imports included) and ``child_cpu_s``; or ``{"status": "error",
+    "error": ...}`` when it raised, ``"timeout"`` when it ran over ``timeout`` seconds (it is
+    killed), ``"crashed"`` when the process died (``exit_code``)."""
+    ctx = mp.get_context("spawn")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(send, fn, args, kwargs), daemon=True)
+    t0 = time.perf_counter()
+    proc.start()
+    send.close()
+    out = None
+    if recv.poll(timeout):
+        try:
+            out = recv.recv()
+        except EOFError:
+            out = None
+    elapsed = time.perf_counter() - t0
+    proc.join(10 if out is not None else 0.5)
+    if proc.is_alive():
+        proc.kill()
+        proc.join()
+    recv.close()
+    if out is None:
+        if elapsed >= timeout:
+            out = {"status": "timeout", "error": f"no result after {timeout:g} s (killed)"}
+        else:
+            out = {"status": "crashed", "exit_code": proc.exitcode,
+                   "error": f"child process died (exit code {proc.exitcode})"}
+    out["process_wall_s"] = elapsed
+    return out
