@@ -23,12 +23,25 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
-from . import kernels as _k
 from .errors import MeshValidationError
+
+
+class _KernelsOnFirstUse:
+    """Stands for :mod:`shellmesh_mdao.kernels` until a function here first calls a kernel:
+    then it imports the module (numba, about half a second) and puts it in its own place, so
+    ``import shellmesh_mdao.mesh`` stays cheap and the calls below (``_k.cross_rows(...)``, ...)
+    are the module's own functions from then on, with no cost per call."""
+
+    def __getattr__(self, name):
+        global _k
+        from . import kernels
+
+        _k = kernels
+        return getattr(kernels, name)
+
+
+_k = _KernelsOnFirstUse()
 
 __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces",
            "cross_rows", "reduce_short", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows"]
@@ -437,6 +450,9 @@ class ShellMesh:
         f = t.he_face[he]
         same = e[1:] == e[:-1]
         a, b = f[:-1][same], f[1:][same]
+        from scipy import sparse
+        from scipy.sparse.csgraph import connected_components
+
         g = sparse.coo_matrix((np.ones(len(a)), (a, b)), shape=(self.n_faces, self.n_faces))
         return int(connected_components(g, directed=False)[0])
 
@@ -481,6 +497,8 @@ class ShellMesh:
             empty2 = np.zeros((0, 2), np.int64)
             return MeshCheck(empty2, np.zeros(0, np.int64), np.zeros(0, np.int64), empty2,
                              np.zeros((0, 3), np.int64), nonfinite)
+        from scipy.spatial import cKDTree
+
         dup = np.array(sorted(cKDTree(pts).query_pairs(eps)), dtype=np.int64).reshape(-1, 2) \
             if len(pts) else np.zeros((0, 2), np.int64)
         # degenerate: repeated node in a face or area below eps^2-scale
@@ -599,6 +617,8 @@ def _hanging_nodes(pts: np.ndarray, topo: EdgeTopology, eps: float) -> np.ndarra
     bnd = topo.edges[topo.boundary]
     if len(bnd) < 3:
         return np.zeros((0, 3), np.int64)
+    from scipy.spatial import cKDTree
+
     bnodes = np.unique(bnd)
     tree = cKDTree(pts[bnodes])
     p0, p1 = pts[bnd[:, 0]], pts[bnd[:, 1]]
@@ -629,6 +649,10 @@ def merge_close_points(points: np.ndarray, tol: float) -> tuple[np.ndarray, np.n
     n = len(points)
     if n == 0:
         return points.copy(), np.zeros(0, np.int64)
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
     pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")
     if len(pairs) == 0:
         return points.copy(), np.arange(n, dtype=np.int64)
