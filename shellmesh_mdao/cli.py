@@ -18,13 +18,15 @@ import argparse
 import json
 import logging
 import sys
-import time
 import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
 from . import __version__
 from .errors import ShellMeshError
+from .study import display_path, jsonable, relative_path, run_study, status
+
+__all__ = ["main", "build_parser"]
 
 log = logging.getLogger("shellmesh_mdao")
 
@@ -70,44 +72,6 @@ def _logging(quiet: bool, verbose: bool):
         log.removeHandler(h)
         log.setLevel(saved[0])
         log.propagate = saved[1]
-
-
-@contextmanager
-def _status(message: str, quiet: bool):
-    """A spinner on stderr while a long step runs (terminals only, not with --quiet)."""
-    status = None
-    if not quiet and sys.stderr.isatty():
-        try:
-            from rich.console import Console
-
-            status = Console(stderr=True).status(message)
-            status.start()
-        except Exception:  # rich missing or no terminal: no spinner
-            status = None
-    try:
-        yield
-    finally:
-        if status is not None:
-            status.stop()
-
-
-def _jsonable(o):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
-
-
-def _rel(p) -> str:
-    """A path as the user will recognise it: relative to the current folder when inside it."""
-    p = Path(p)
-    try:
-        return str(p.resolve().relative_to(Path.cwd().resolve()))
-    except ValueError:
-        return str(p)
 
 
 # ----------------------------------------------------------------------------- info, quality
@@ -213,39 +177,6 @@ def _study_from_args(args):
     return cfg
 
 
-def _check_study(cfg, where: str):
-    from .config import REPORT_FORMATS
-    from .export import check_output_path
-
-    src = f" or '{{key}}:' in {_rel(cfg.source)}" if cfg.source is not None else " or use --config FILE"
-    if cfg.surface is None:
-        raise _UsageError(f"{where}: no surface given; give SURFACE on the command line"
-                          + src.format(key="surface"))
-    if cfg.layout is None:
-        raise _UsageError(f"{where}: no layout given; give --layout FILE (.json/.yaml, see docs/layout.md)"
-                          + src.format(key="layout"))
-    if cfg.size is None:
-        raise _UsageError(f"{where}: no size given; give --size H (target quad edge length)"
-                          + src.format(key="size"))
-    if not cfg.out and cfg.report is None and cfg.html is None:
-        raise _UsageError(f"{where}: nothing to write; give --out MESH (.vtu .bdf .inp .msh), --report "
-                          "REPORT.json and/or --html REPORT.html" + src.format(key="out"))
-    for o in cfg.out:
-        check_output_path(o)
-    if cfg.report is not None:
-        check_output_path(cfg.report, formats={".json": "report"})
-    if cfg.html is not None:
-        check_output_path(cfg.html, formats=REPORT_FORMATS)
-    if cfg.material is not None:
-        from .export import resolve_material
-
-        resolve_material(cfg.material)
-    if isinstance(cfg.thickness, dict):
-        from .config import check_thickness_names
-
-        check_thickness_names(cfg.thickness, cfg.layout, cfg.source)
-
-
 def _print_summary(result):
     r = result.report
     c = r["counts"]
@@ -260,76 +191,12 @@ def _print_summary(result):
         log.debug("  %s: %s", name, line)
 
 
-def _run_study(cfg, quiet: bool):
-    """Run the pipeline of a checked study and write its outputs: meshes, then the human report
-    (pictures), then the JSON report last (it records the seconds of the outputs too)."""
-    from .export import write_mesh, write_text_atomic
-    from .pipeline import STAGES, run_pipeline
-    from .quality import element_quality, quality_summary
-    from .report import report_data, write_report
-
-    until = cfg.until or STAGES[-1]
-    result = run_pipeline(str(cfg.surface), cfg.layout if isinstance(cfg.layout, dict) else str(cfg.layout),
-                          cfg.size, until=until, progress=not quiet, options=cfg.solver or None)
-    mesh = result.mesh
-    rep = result.report
-    if cfg.source is not None:
-        rep["inputs"]["config"] = str(cfg.source)
-    if cfg.solver:
-        rep["inputs"]["solver"] = dict(cfg.solver)
-    out_seconds: dict = {}
-    t0 = time.perf_counter()
-    q = element_quality(mesh.points, mesh.faces)
-    rep["quality"] = quality_summary(mesh, by_component=True)
-    from .config import thickness_by_component
-
-    thickness = thickness_by_component(cfg.thickness, mesh.component_names)
-    written = []
-    with _status("writing the mesh ...", quiet):
-        for o in cfg.out:
-            write_mesh(mesh, o, thickness=thickness, material=cfg.material,
-                       quality=q if Path(o).suffix.lower() == ".vtu" else None)
-            log.info("wrote %s (%d nodes, %d elements)", _rel(o), mesh.n_points, mesh.n_faces)
-            written.append(Path(o))
-    out_seconds["export"] = round(time.perf_counter() - t0, 4)
-    data = report_data(result, metrics=q)
-    rep["families"] = data["families"]
-    rep["worst_elements"] = data["worst_elements"]
-    if cfg.html is not None:
-        t1 = time.perf_counter()
-        html_dir = Path(cfg.html).resolve().parent
-        links = [(Path(p).name, _relative_to(p, html_dir)) for p in written]
-        if cfg.report is not None:
-            links.append((Path(cfg.report).name, _relative_to(cfg.report, html_dir)))
-        with _status("drawing pictures and writing the report ...", quiet):
-            write_report(result, cfg.html, pictures=cfg.pictures, links=links, data=data)
-        out_seconds["report"] = round(time.perf_counter() - t1, 4)
-        written.append(Path(cfg.html))
-    rep["output_seconds"] = out_seconds
-    rep["outputs"] = [str(p) for p in written] + ([str(cfg.report)] if cfg.report is not None else [])
-    if cfg.report is not None:
-        write_text_atomic(cfg.report, json.dumps(rep, indent=2, default=_jsonable))
-        log.info("wrote %s", _rel(cfg.report))
-        written.append(Path(cfg.report))
-    return result, written
-
-
-def _relative_to(p, folder: Path) -> str:
-    import os
-
-    try:
-        return Path(os.path.relpath(Path(p).resolve(), folder)).as_posix()
-    except ValueError:
-        return str(p)
-
-
 def _cmd_mesh(args) -> int:
     cfg = _study_from_args(args)
-    _check_study(cfg, "shellmesh mesh")
-    result, written = _run_study(cfg, args.quiet)
+    result, written = run_study(cfg, args.quiet, where="shellmesh mesh")
     if not args.quiet:
         _print_summary(result)
-        print("outputs: " + ", ".join(_rel(p) for p in written))
+        print("outputs: " + ", ".join(display_path(p) for p in written))
     return 0
 
 
@@ -356,17 +223,16 @@ def _cmd_demo(args) -> int:
                       report=(out_dir / f"{stem}_report.json").resolve(),
                       html=(out_dir / f"{stem}_report.html").resolve(), pictures=not args.no_pictures)
     study = write_config(cfg, out_dir / f"{stem}_study.yaml")
-    _check_study(cfg, "shellmesh demo")
-    result, written = _run_study(cfg, args.quiet)
+    result, written = run_study(cfg, args.quiet, where="shellmesh demo")
     if not args.quiet:
         _print_summary(result)
         qs = result.report["quality"]
         print(format_summary({k: v for k, v in qs.items() if k != "components"}))
         print(_format_components(qs))
         names = [surf_path, lay_path, study] + written
-        print(f"outputs in {_rel(out_dir)}/: " + ", ".join(Path(p).name for p in names))
-        print(f"open {_rel(cfg.html)} for the report and pictures; re-run the study with "
-              f"'shellmesh mesh --config {_rel(study)}'")
+        print(f"outputs in {display_path(out_dir)}/: " + ", ".join(Path(p).name for p in names))
+        print(f"open {display_path(cfg.html)} for the report and pictures; re-run the study with "
+              f"'shellmesh mesh --config {display_path(study)}'")
     return 0
 
 
@@ -401,7 +267,7 @@ def _cmd_render(args) -> int:
     win = _window(args.window)
     up = _vector(args.up) if args.up else None
     mesh = load_any(args.meshfile)
-    with _status("rendering ...", args.quiet):
+    with status("rendering ...", args.quiet):
         if args.view == "all":
             paths = render_views(mesh, out.parent, out.stem, up=up, worst=args.worst, window_size=win)
         elif args.view == "worst":
@@ -411,7 +277,7 @@ def _cmd_render(args) -> int:
         else:
             paths = [render_mesh(mesh, out, args.color, args.view, window_size=win, edges=args.edges, up=up)]
     if not args.quiet:
-        print("wrote " + ", ".join(_rel(p) for p in paths))
+        print("wrote " + ", ".join(display_path(p) for p in paths))
     return 0
 
 
@@ -427,13 +293,13 @@ def _cmd_report(args) -> int:
     mesh = load_any(args.meshfile)
     data = report_data(mesh)
     data["inputs"] = {"mesh": str(args.meshfile)}
-    with _status("drawing pictures and writing the report ...", args.quiet):
+    with status("drawing pictures and writing the report ...", args.quiet):
         write_report(mesh, args.html, pictures=not args.no_pictures, data=data,
-                     links=[(Path(args.meshfile).name, _relative_to(args.meshfile, Path(args.html).resolve().parent))])
+                     links=[(Path(args.meshfile).name, relative_path(args.meshfile, Path(args.html).resolve().parent))])
     if args.json:
-        write_text_atomic(args.json, json.dumps(data, indent=2, default=_jsonable))
+        write_text_atomic(args.json, json.dumps(data, indent=2, default=jsonable))
     if not args.quiet:
-        print(f"wrote {_rel(args.html)}" + (f", {_rel(args.json)}" if args.json else ""))
+        print(f"wrote {display_path(args.html)}" + (f", {display_path(args.json)}" if args.json else ""))
     return 0
 
 

@@ -6,6 +6,9 @@ The CLI turns these into one line on stderr and exit code 2; any other exception
 is an internal error (exit code 1, with a request to report it).
 """
 
+__all__ = ["ShellMeshError", "InputFileError", "MeshValidationError", "LayoutError", "ProjectionError",
+           "ImprintError", "SizeError", "OutputError", "SolverError"]
+
 
 class ShellMeshError(Exception):
     """Base class of all user-facing errors (CLI exit code 2)."""

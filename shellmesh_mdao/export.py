@@ -38,7 +38,7 @@ from .errors import OutputError, ShellMeshError
 from .mesh import ShellMesh
 
 __all__ = [
-    "write_mesh", "check_output_path", "write_text_atomic", "export_order", "resolve_thickness", "resolve_material", "inp_mesh_lines",
+    "write_mesh", "check_output_path", "write_text_atomic", "atomic_write", "export_order", "resolve_thickness", "resolve_material", "inp_mesh_lines",
     "inp_elset_names", "bdf_family_name", "DEFAULT_THICKNESS", "DEFAULT_MATERIAL", "OUTPUT_FORMATS",
 ]
 
@@ -255,10 +255,15 @@ def check_output_path(path, formats=None) -> Path:
 def write_text_atomic(path, text: str) -> Path:
     """Write a text file (a report) atomically: temporary file in the same folder, then rename."""
     path = Path(path)
-    return _atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
-def _atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
+def atomic_write(path, write: Callable[[Path], None]) -> Path:
+    """Write ``path`` atomically: ``write(tmp)`` fills a temporary file in the same folder,
+    which then replaces ``path`` (permissions as a new file would get). A failure removes the
+    temporary file and leaves ``path`` as it was; an :class:`OSError` becomes an
+    :class:`~shellmesh_mdao.errors.OutputError` naming the file. Returns ``path``."""
+    path = Path(path)
     _check_folder(path)
     tmp_name = _temp_in(path)
     tmp = Path(tmp_name)
@@ -302,14 +307,14 @@ def write_mesh(mesh: ShellMesh, path, *, thickness=None, material: dict | None =
                           "NaN/inf coordinates; fix the mesh first (ShellMesh.check lists them)")
     if ext in (".bdf", ".nas"):
         t, mat = resolve_thickness(mesh, thickness), resolve_material(material)
-        return _atomic_write(path, lambda p: _write_bdf(mesh, p, t, mat))
+        return atomic_write(path, lambda p: _write_bdf(mesh, p, t, mat))
     if ext == ".inp":
         blocks = inp_mesh_lines(mesh, thickness, material)
-        return _atomic_write(path, lambda p: _write_blocks(p, blocks))
+        return atomic_write(path, lambda p: _write_blocks(p, blocks))
     if ext == ".vtu":
         q = _check_quality(mesh, quality)
-        return _atomic_write(path, lambda p: _write_vtu(mesh, p, q))
-    return _atomic_write(path, lambda p: _write_msh(mesh, p))
+        return atomic_write(path, lambda p: _write_vtu(mesh, p, q))
+    return atomic_write(path, lambda p: _write_msh(mesh, p))
 
 
 def _write_blocks(path: Path, blocks) -> None:

@@ -23,12 +23,25 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
-from .core import kernels as _k
 from .errors import MeshValidationError
+
+
+class _KernelsOnFirstUse:
+    """Stands for :mod:`shellmesh_mdao.core.kernels` until a function here first calls a kernel:
+    then it imports the module (numba, about half a second) and puts it in its own place, so
+    ``import shellmesh_mdao.mesh`` stays cheap and the calls below (``_k.cross_rows(...)``, ...)
+    are the module's own functions from then on, with no cost per call."""
+
+    def __getattr__(self, name):
+        global _k
+        from .core import kernels
+
+        _k = kernels
+        return getattr(kernels, name)
+
+
+_k = _KernelsOnFirstUse()
 
 __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces",
            "cross_rows", "reduce_short", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows"]
@@ -38,7 +51,7 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product over the last axis (length 3) of broadcastable arrays: the same arithmetic
     as ``np.cross`` (so the same bits) without its axis handling, which costs more than the
     product itself on the small batches of the remesher, the imprint and the smoother. Two
-    (k, 3) float64 arrays go to a compiled loop (:func:`~shellmesh_mdao.kernels.cross_rows`,
+    (k, 3) float64 arrays go to a compiled loop (:func:`~shellmesh_mdao.core.kernels.cross_rows`,
     the same arithmetic)."""
     out = _k.cross_rows(a, b)
     if out is not None:
@@ -114,7 +127,7 @@ def norm_rows(a, axis: int = -1, keepdims: bool = False) -> np.ndarray:
 
 def dot_rows(a, b) -> np.ndarray:
     """``np.einsum("ij,ij->i", a, b)``, the same bits; (k, 3) float64 rows through a compiled
-    loop (:func:`~shellmesh_mdao.kernels.dot_rows`), anything else through numpy."""
+    loop (:func:`~shellmesh_mdao.core.kernels.dot_rows`), anything else through numpy."""
     out = _k.dot_rows(a, b)
     return np.einsum("ij,ij->i", a, b) if out is None else out
 
@@ -437,6 +450,9 @@ class ShellMesh:
         f = t.he_face[he]
         same = e[1:] == e[:-1]
         a, b = f[:-1][same], f[1:][same]
+        from scipy import sparse
+        from scipy.sparse.csgraph import connected_components
+
         g = sparse.coo_matrix((np.ones(len(a)), (a, b)), shape=(self.n_faces, self.n_faces))
         return int(connected_components(g, directed=False)[0])
 
@@ -481,6 +497,8 @@ class ShellMesh:
             empty2 = np.zeros((0, 2), np.int64)
             return MeshCheck(empty2, np.zeros(0, np.int64), np.zeros(0, np.int64), empty2,
                              np.zeros((0, 3), np.int64), nonfinite)
+        from scipy.spatial import cKDTree
+
         dup = np.array(sorted(cKDTree(pts).query_pairs(eps)), dtype=np.int64).reshape(-1, 2) \
             if len(pts) else np.zeros((0, 2), np.int64)
         # degenerate: repeated node in a face or area below eps^2-scale
@@ -520,7 +538,7 @@ def _unique_edges_with_ids(fe: np.ndarray, ids: np.ndarray):
 
 def _pair_runs(lo, hi):
     """The pairs ``(lo[i], hi[i])`` (non-empty, non-negative ids) in sorted order, stably (two
-    counting sorts, :func:`~shellmesh_mdao.kernels.stable_pair_order`): ``(order, first,
+    counting sorts, :func:`~shellmesh_mdao.core.kernels.stable_pair_order`): ``(order, first,
     pairs)``, ``first`` marking the first of each run of one pair in that order and ``pairs``
     (runs, 2) the distinct pairs."""
     order = _k.stable_pair_order(lo, hi, int(hi.max()) + 1)
@@ -599,6 +617,8 @@ def _hanging_nodes(pts: np.ndarray, topo: EdgeTopology, eps: float) -> np.ndarra
     bnd = topo.edges[topo.boundary]
     if len(bnd) < 3:
         return np.zeros((0, 3), np.int64)
+    from scipy.spatial import cKDTree
+
     bnodes = np.unique(bnd)
     tree = cKDTree(pts[bnodes])
     p0, p1 = pts[bnd[:, 0]], pts[bnd[:, 1]]
@@ -629,6 +649,10 @@ def merge_close_points(points: np.ndarray, tol: float) -> tuple[np.ndarray, np.n
     n = len(points)
     if n == 0:
         return points.copy(), np.zeros(0, np.int64)
+    from scipy import sparse
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
     pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")
     if len(pairs) == 0:
         return points.copy(), np.arange(n, dtype=np.int64)

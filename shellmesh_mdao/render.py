@@ -342,7 +342,7 @@ def _save(pl, out_png) -> Path:
     """Screenshot to ``out_png`` atomically; raise OutputError for a blank image."""
     from PIL import Image
 
-    from .export import _atomic_write
+    from .export import atomic_write
 
     out_png = Path(out_png)
     if out_png.suffix.lower() != ".png":
@@ -356,7 +356,7 @@ def _save(pl, out_png) -> Path:
     img = np.asarray(img)
     if img.size == 0 or int(img.max()) == int(img.min()):
         raise OutputError("rendering produced a blank picture: no working off-screen OpenGL; " + OFFSCREEN_HELP)
-    return _atomic_write(out_png, lambda p: Image.fromarray(img).save(p, format="PNG"))
+    return atomic_write(out_png, lambda p: Image.fromarray(img).save(p, format="PNG"))
 
 
 def _edges_auto(n_visible: int, window_size) -> bool:

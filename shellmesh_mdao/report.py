@@ -162,7 +162,7 @@ def write_histograms(mesh: ShellMesh, out_png, metrics: dict | None = None) -> P
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .export import _atomic_write
+    from .export import atomic_write
 
     q = element_quality(mesh.points, mesh.faces) if metrics is None else metrics
     quad = mesh.is_quad
@@ -196,7 +196,7 @@ def write_histograms(mesh: ShellMesh, out_png, metrics: dict | None = None) -> P
     axes[0, 0].legend(fontsize=8, loc="upper left")
     fig.suptitle("element quality (red lines: acceptance limits, solid quads / dashed triangles)", fontsize=11)
     fig.subplots_adjust(left=0.06, right=0.98, bottom=0.06, top=0.9, wspace=0.25, hspace=0.3)
-    return _atomic_write(Path(out_png), lambda p: fig.savefig(p, format="png"))
+    return atomic_write(Path(out_png), lambda p: fig.savefig(p, format="png"))
 
 
 # ----------------------------------------------------------------------------- formatting
@@ -443,7 +443,7 @@ def write_report(result, out_path, pictures: bool = True, *, links=(), worst: in
     off-screen OpenGL) the report is still written, with a note saying how to fix it.
     Everything is written atomically: the images go to a temporary folder first and are
     moved in place just before the page; nothing is left behind on error. Returns the path."""
-    from .export import _atomic_write, check_output_path
+    from .export import atomic_write, check_output_path
 
     t0 = time.perf_counter()
     out = Path(out_path)
@@ -481,7 +481,7 @@ def write_report(result, out_path, pictures: bool = True, *, links=(), worst: in
                 dst = out.parent / p.name
                 os.replace(p, dst)
                 final.append(dst)
-            _atomic_write(out, lambda p: p.write_text(text, encoding="utf-8"))
+            atomic_write(out, lambda p: p.write_text(text, encoding="utf-8"))
         except BaseException:
             for dst in final:            # no page: take its images away again
                 dst.unlink(missing_ok=True)

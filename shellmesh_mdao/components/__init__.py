@@ -7,3 +7,17 @@ Stage components, each calling the pipeline stage of the same name (:mod:`shellm
 Analysis: ``MassComp`` (mass_comp.py) and ``CalculixShellAnalysis`` (calculix_comp.py) wrap
 :mod:`shellmesh_mdao.analysis` (docs/analysis.md).
 """
+from .calculix_comp import CalculixShellAnalysis
+from .group import ShellMeshGroup
+from .imprint_comp import ImprintComp
+from .layout_comp import LayoutComp
+from .mass_comp import MassComp
+from .member_mesh_comp import MemberMeshComp
+from .merge_comp import MergeComp
+from .projection_comp import ProjectionComp
+from .quad_comp import QuadComp
+from .smooth_comp import SmoothComp
+from .split_comp import SplitComp
+
+__all__ = ["ShellMeshGroup", "LayoutComp", "ProjectionComp", "ImprintComp", "MemberMeshComp", "SplitComp",
+           "MergeComp", "SmoothComp", "QuadComp", "MassComp", "CalculixShellAnalysis"]
