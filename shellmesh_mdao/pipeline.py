@@ -27,6 +27,10 @@ from .mesh import ShellMesh, norm_rows
 
 log = logging.getLogger("shellmesh_mdao")
 
+__all__ = ["STAGES", "REMESH_FACTOR", "PipelineOptions", "PipelineState", "PipelineResult", "one_blas_thread",
+           "check_size", "stage_load", "stage_layout", "stage_project", "stage_remesh", "stage_imprint",
+           "stage_members", "stage_split", "stage_merge", "stage_smooth", "stage_quad", "run_stage", "run_pipeline"]
+
 #: Stages in order; ``--until`` takes one of these.
 STAGES = ("load", "layout", "project", "remesh", "imprint", "members", "split", "merge", "smooth", "quad")
 
