@@ -366,17 +366,29 @@ def stage_project(state: PipelineState) -> PipelineState:
     return state.but(projected=projected, specs=chain_specs(state.layout, projected), stage="project")
 
 
-def stage_remesh(state: PipelineState) -> PipelineState:
-    """Isotropic, curvature-adapted remesh of the skin at ``REMESH_FACTOR * size``."""
+def stage_remesh(state: PipelineState, cache=None) -> PipelineState:
+    """Isotropic, curvature-adapted remesh of the skin at ``REMESH_FACTOR * size``. ``cache``: a
+    :class:`~shellmesh_mdao.remesh.RemeshCache` to look the skin up in first and store it in (the
+    report of a state built from it has ``remesh_cache = {"hit": True, "seconds": <the original
+    remesh's time>}``); None remeshes."""
     from .remesh import remesh_skin
 
     _need(state, "remesh")
-    skin = state.surface
-    if state.options.remesh:
-        target = REMESH_FACTOR * state.size
-        skin = remesh_skin(state.surface, target, max_deviation=state.options.remesh_deviation * target,
-                           deviation_pass_fraction=state.options.remesh_pass_fraction,
-                           locator=state.locator)
+    if not state.options.remesh:
+        return state.but(mesh=state.surface, stage="remesh")
+    key = cache.key(state.surface, state.size, state.options) if cache is not None else None
+    hit = cache.get(key) if cache is not None else None
+    if hit is not None:
+        st = state.but(mesh=hit.mesh, stage="remesh")
+        st.report["remesh_cache"] = {"hit": True, "seconds": hit.seconds}
+        return st
+    t0 = time.perf_counter()
+    target = REMESH_FACTOR * state.size
+    skin = remesh_skin(state.surface, target, max_deviation=state.options.remesh_deviation * target,
+                       deviation_pass_fraction=state.options.remesh_pass_fraction,
+                       locator=state.locator)
+    if cache is not None:
+        cache.put(key, skin, time.perf_counter() - t0)
     return state.but(mesh=skin, stage="remesh")
 
 
@@ -485,25 +497,37 @@ _STAGE_FUNCS = {"project": stage_project, "remesh": stage_remesh, "imprint": sta
                 "quad": stage_quad}
 
 
-def run_stage(state: PipelineState, name: str) -> PipelineState:
-    """Run stage ``name`` (one after ``layout``) on ``state``, timing it into the report."""
+def run_stage(state: PipelineState, name: str, *, remesh_cache=None) -> PipelineState:
+    """Run stage ``name`` (one after ``layout``) on ``state``, timing it into the report;
+    ``remesh_cache``: the remesh stage's :class:`~shellmesh_mdao.remesh.RemeshCache` (None: none)."""
     if name not in _STAGE_FUNCS:
         raise ShellMeshError(f"unknown stage {name!r}; run_stage takes one of: {', '.join(_STAGE_FUNCS)}")
     seconds: dict = {}
     with _Stages(False)(name, seconds):
-        st = _STAGE_FUNCS[name](state)
+        st = stage_remesh(state, remesh_cache) if name == "remesh" else _STAGE_FUNCS[name](state)
     st.report["stages"][name] = seconds[name]
     return st
 
 
 def run_pipeline(surface, layout, size, *, until: str = STAGES[-1], progress: bool = True,
-                 remesh: bool = True, options: dict | PipelineOptions | None = None) -> PipelineResult:
+                 remesh: bool = True, options: dict | PipelineOptions | None = None,
+                 remesh_cache=True) -> PipelineResult:
     """Run the stages up to ``until`` on ``surface`` (path or :class:`ShellMesh`) with the member
     ``layout`` (path, dict or :class:`~shellmesh_mdao.layout.Layout`) at target quad size
     ``size``. ``options``: :class:`PipelineOptions` or a dict of them (solver options);
-    ``remesh=False`` imprints into the input triangulation as it is (for tests)."""
+    ``remesh=False`` imprints into the input triangulation as it is (for tests).
+
+    ``remesh_cache``: True (default) keeps the remeshed skin in the process's
+    :data:`~shellmesh_mdao.remesh.DEFAULT_REMESH_CACHE`, so a loop over layouts on one surface,
+    size and options remeshes once (the skin does not depend on the layout; a hit is the same skin
+    bit for bit); a :class:`~shellmesh_mdao.remesh.RemeshCache` uses that one; False or None
+    remeshes every time."""
     if until not in STAGES:
         raise ShellMeshError(f"unknown stage {until!r}; --until takes one of: {', '.join(STAGES)}")
+    if remesh_cache is True:
+        from .remesh.cache import DEFAULT_REMESH_CACHE as remesh_cache
+    elif remesh_cache is False:
+        remesh_cache = None
     opts = PipelineOptions.from_dict(options)
     if not remesh:
         opts = dataclasses.replace(opts, remesh=False)
@@ -514,7 +538,12 @@ def run_pipeline(surface, layout, size, *, until: str = STAGES[-1], progress: bo
     state.report["inputs"]["until"] = until
     for name in STAGES[1:STAGES.index(until) + 1]:
         with timer(name, seconds):
-            state = stage_layout(state, layout) if name == "layout" else _STAGE_FUNCS[name](state)
+            if name == "layout":
+                state = stage_layout(state, layout)
+            elif name == "remesh":
+                state = stage_remesh(state, remesh_cache)
+            else:
+                state = _STAGE_FUNCS[name](state)
     state.report["stages"] = seconds
     return _finish(PipelineResult(state.mesh, state.report, surface=state.surface, layout=state.layout,
                                   chains=state.chains, stage=state.stage, state=state))

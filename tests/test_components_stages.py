@@ -173,7 +173,7 @@ def test_imprint_comp_and_remesh_cache(states):
     # ... and is exactly the skin a fresh remesh gives
     fresh = pl.run_stage(pl.run_stage(moved, "remesh"), "imprint")
     assert same_mesh(hit.mesh, fresh.mesh)
-    cached = next(iter(comp._remesh_cache.values()))[0]
+    cached = comp.remesh_cache.skins()[0].mesh
     assert not cached.points.flags.writeable and not cached.faces.flags.writeable
     # without the cache every run remeshes
     comp2 = ImprintComp(remesh_cache=False)

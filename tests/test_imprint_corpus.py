@@ -179,7 +179,7 @@ def test_feature_lines_kept_on_sharp_edges(geometry_dir, manifest, name, spars):
 def test_bit_for_bit(geometry_dir, manifest, name):
     lay, res = imprinted(geometry_dir, manifest, name, "2spar")
     again = run_pipeline(geometry_dir / manifest["geometries"][name]["file"], lay, SIZES[name],
-                         until="imprint", progress=False)
+                         until="imprint", progress=False, remesh_cache=False)
     assert np.array_equal(res.mesh.points, again.mesh.points)
     assert np.array_equal(res.mesh.faces, again.mesh.faces)
     assert np.array_equal(res.mesh.component, again.mesh.component)

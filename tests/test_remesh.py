@@ -490,3 +490,33 @@ def test_midpoint_distances_reuse_only_unchanged_midpoints():
     mids_c._keys = lambda X: np.zeros(len(X), np.uint64)
     mids_c(P, E, vtri)
     assert np.array_equal(mids_c(P2, E2, vtri), d2)
+
+
+# ----------------------------------------------------------------------------- remesh cache
+def test_run_pipeline_remeshes_once_per_surface_size_and_options():
+    """A Python loop over layouts (a DOE) remeshes the skin once: the second run on the same
+    surface, size and options takes the skin from the cache, and it is the skin a run without the
+    cache makes, bit for bit; another size or option misses; the cache keeps its last skins only."""
+    from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
+    from shellmesh_mdao.layout import load_layout
+    from shellmesh_mdao.pipeline import run_pipeline
+    from shellmesh_mdao.remesh import RemeshCache
+
+    cache = RemeshCache(2)
+    lay = load_layout(naca_wing_layout())
+    moved = lay.with_parameters(spar_chord={w.name: [0.2, 0.6] for w in lay.wings})
+    first = run_pipeline(naca_wing(), lay, 0.2, until="remesh", progress=False, remesh_cache=cache)
+    assert cache.stats["misses"] == 1 and "remesh_cache" not in first.report
+    second = run_pipeline(naca_wing(), moved, 0.2, until="imprint", progress=False, remesh_cache=cache)
+    assert cache.stats["hits"] == 1 and second.report["remesh_cache"]["hit"]
+    fresh = run_pipeline(naca_wing(), moved, 0.2, until="imprint", progress=False, remesh_cache=False)
+    for a in ("points", "faces", "component", "feature_edges"):
+        assert np.array_equal(getattr(second.mesh, a), getattr(fresh.mesh, a)), a
+    skin = cache.skins()[0].mesh
+    assert not skin.points.flags.writeable and not skin.faces.flags.writeable
+    run_pipeline(naca_wing(), lay, 0.2, until="remesh", progress=False, remesh_cache=cache,
+                 options={"remesh_deviation": 0.2})
+    run_pipeline(naca_wing(), lay, 0.25, until="remesh", progress=False, remesh_cache=cache)
+    assert cache.stats["misses"] == 3 and len(cache) == 2
+    with pytest.raises(ValueError, match="at least 1"):
+        RemeshCache(0)

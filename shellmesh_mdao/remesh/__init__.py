@@ -32,13 +32,14 @@ Modules: ``common`` (thresholds, vertex kinds, small array helpers, the edge tab
 ``surface`` (the input skin: patches, feature chains, sizing field, projection), ``work``
 (the working mesh and the services the operations share), ``operations`` (batched splits,
 collapses and flips), ``relax`` (tangential relaxation), ``driver`` (:func:`remesh_skin`,
-:func:`remesh_statistics`), ``improve`` (:func:`improve_triangles`). The compiled (numba)
-kernels they call are in :mod:`shellmesh_mdao.kernels`.
+:func:`remesh_statistics`), ``improve`` (:func:`improve_triangles`), ``cache`` (:class:`RemeshCache`:
+remeshed skins kept across runs), ``kernels`` (the compiled loops only the remesh uses).
 """
 from __future__ import annotations
 
 from .driver import DEFAULT_DEVIATION_FRACTION, DEFAULT_MIN_EDGE_FRACTION, remesh_skin, remesh_statistics
+from .cache import DEFAULT_REMESH_CACHE, RemeshCache
 from .improve import improve_triangles
 
 __all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION",
-           "DEFAULT_MIN_EDGE_FRACTION"]
+           "DEFAULT_MIN_EDGE_FRACTION", "RemeshCache", "DEFAULT_REMESH_CACHE"]
