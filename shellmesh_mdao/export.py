@@ -35,6 +35,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .errors import OutputError, ShellMeshError
+from .core.formats import inp_elset_names, n_components, sanitise_name
 from .mesh import ShellMesh
 
 __all__ = [
@@ -70,11 +71,6 @@ def export_order(mesh: ShellMesh) -> np.ndarray:
     return np.lexsort((mesh.is_tri.astype(np.int8), mesh.component)).astype(np.int64)
 
 
-def _n_components(mesh: ShellMesh) -> int:
-    m = int(mesh.component.max()) + 1 if mesh.n_faces else 0
-    return max(len(mesh.component_names), m)
-
-
 def resolve_thickness(mesh: ShellMesh, thickness=None) -> np.ndarray:
     """Thickness of each component, a (ncomp,) float array.
 
@@ -82,7 +78,7 @@ def resolve_thickness(mesh: ShellMesh, thickness=None) -> np.ndarray:
     a dict ``component name -> t`` (components not named get the default) or a sequence
     with one value per component id.  Raises :class:`OutputError` for unknown names,
     wrong lengths and non-positive or non-finite values."""
-    k = _n_components(mesh)
+    k = n_components(mesh)
     names = list(mesh.component_names)
     if thickness is None:
         t = np.full(k, DEFAULT_THICKNESS)
@@ -162,30 +158,6 @@ def _real20(x) -> str:
     """Shortest exact text of a real if it fits CalculiX's 20-character field, else 14 digits."""
     r = repr(float(x))
     return r if len(r) <= 20 else f"{float(x):.13e}"
-
-
-def _sanitise(name: str, maxlen: int, taken: set, fallback: str) -> str:
-    s = re.sub(r"[^A-Za-z0-9_]", "_", name.strip()) or fallback
-    if not s[0].isalpha():
-        s = "C_" + s
-    s = s[:maxlen]
-    base, k = s, 1
-    while s.upper() in taken:
-        suffix = f"_{k}"
-        s = base[:maxlen - len(suffix)] + suffix
-        k += 1
-    taken.add(s.upper())
-    return s
-
-
-def inp_elset_names(mesh: ShellMesh) -> list[str]:
-    """CalculiX ELSET name of each component: letters, digits and ``_`` only, starting with a
-    letter, at most 80 characters, unique ignoring case (CalculiX upper-cases names), never
-    ``EALL``/``NALL``."""
-    taken = {"EALL", "NALL"}
-    names = list(mesh.component_names) + [f"component_{i}" for i in
-                                          range(len(mesh.component_names), _n_components(mesh))]
-    return [_sanitise(n, 80, taken, f"component_{i}") for i, n in enumerate(names)]
 
 
 def bdf_family_name(name: str, cid: int) -> str:
@@ -413,7 +385,7 @@ def inp_mesh_lines(mesh: ShellMesh, thickness=None, material: dict | None = None
     k = len(t)
     elsets = inp_elset_names(mesh)
     names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), k)]
-    matname = _sanitise(mat["name"], 80, set(), "MATERIAL")
+    matname = sanitise_name(mat["name"], 80, set(), "MATERIAL")
     order = export_order(mesh)
     faces = mesh.faces[order]
     comp = mesh.component[order]
@@ -483,7 +455,7 @@ def _write_vtu(mesh: ShellMesh, path: Path, quality: dict) -> None:
     m = meshio.Mesh(mesh.points, cells, point_data={"fixed": fixed}, cell_data=cdata if cells else {})
     meshio.write(str(path), m, file_format="vtu")
     # meshio's VTU writer drops field data: add the component-name table ourselves
-    k = _n_components(mesh)
+    k = n_components(mesh)
     names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), k)]
     fd = "<FieldData>\n" + "".join(
         f'<DataArray type="Int32" Name={quoteattr(_one_line(n))} NumberOfTuples="1" format="ascii">{i}'
@@ -522,7 +494,7 @@ def _write_msh(mesh: ShellMesh, path: Path) -> None:
     order = export_order(mesh)
     faces = mesh.faces[order]
     comp = mesh.component[order]
-    k = max(_n_components(mesh), 1)
+    k = max(n_components(mesh), 1)
     names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), k)]
     starts = np.searchsorted(comp, np.arange(k + 1))
     pts = mesh.points

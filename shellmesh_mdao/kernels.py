@@ -1,8 +1,8 @@
 """Compile every numba kernel of the package ahead of its first use.
 
-The compiled kernels live beside the stage that uses them (``remesh/kernels.py``, ``project/kernels.py``,
-``imprint/kernels.py``, ``smooth/kernels.py``, ``merge/kernels.py``); the ones several stages share are in
-``core/kernels.py``. numba compiles each on its first call and caches the machine code next to its module
+The compiled kernels live beside the stage that uses them (``remesh/kernels.py``, ``imprint/kernels.py``,
+``smooth/kernels.py``, ``merge/kernels.py``); the ones several stages share are in ``core/kernels.py`` and the
+closest-point hierarchy of the input skin in ``core/bvh.py``. numba compiles each on its first call and caches the machine code next to its module
 (``cache=True``): about 45 s once per install, 0.3 s to load afterwards. :func:`warm_up` calls every kernel
 once on a tiny input, so that ``make install`` pays the compile and a benchmark loads them before its clock
 starts. Each kernel returns the same arrays, bit for bit, as the numpy code it replaced (tests/test_kernels.py).
@@ -27,7 +27,7 @@ def warm_up() -> float:
     from .imprint.kernels import (centroid_d2, corner_cosines, segments_within, skin_flips, star_independent,
                                   star_moves)
     from .merge.kernels import safe_matching_rounds
-    from .project.kernels import TriangleBVH, closest_on_triangles
+    from .core.bvh import TriangleBVH, closest_on_triangles
     from .remesh.kernels import (collapse_apply, collapse_directions, collapse_select, common_neighbour_counts,
                                  corner_sin_cos, edge_lengths, edge_neighbours, facing_ok, flip_candidates,
                                  greedy_independent_rings, group_order, move_tests, rank_desc, triangle_normals)

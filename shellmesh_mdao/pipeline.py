@@ -325,7 +325,7 @@ def stage_load(surface, size, options=None) -> PipelineState:
     """Read the input skin (path or :class:`ShellMesh`), check ``size`` against it, split any
     quads into triangles and build its BVH locator."""
     from .load import repair_surface
-    from .project import SurfaceLocator
+    from .core.locator import SurfaceLocator
 
     opts = PipelineOptions.from_dict(options)
     report: dict = {"inputs": {"surface": str(surface) if not isinstance(surface, ShellMesh) else "<mesh>",

@@ -260,7 +260,7 @@ def test_box_beam_meshed_by_pipeline_matches_beam_theory():
     assert {"box/rib_1", "box/lower_skin/bay_0"} <= set(m.component_names)
     if m.n_tris:
         # the quad stage is not the default yet: make the quads the same way it will (one subdivision)
-        from shellmesh_mdao.project import SurfaceLocator
+        from shellmesh_mdao.core.locator import SurfaceLocator
         from shellmesh_mdao.quad import subdivide_to_quads
         from shellmesh_mdao.core.supports import derive_supports
 

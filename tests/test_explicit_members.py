@@ -20,7 +20,7 @@ from shellmesh_mdao.layout import load_layout
 from shellmesh_mdao.members import STRIP_MIN_ANGLE
 from shellmesh_mdao.members.meshing import tri_min_angles
 from shellmesh_mdao.pipeline import run_pipeline
-from shellmesh_mdao.project import SurfaceLocator
+from shellmesh_mdao.core.locator import SurfaceLocator
 from shellmesh_mdao.core.section import Plane, section_arc
 
 # smallest member triangle angle: 20 deg where refined, STRIP_MIN_ANGLE in one-element-high strips

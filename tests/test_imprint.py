@@ -205,7 +205,7 @@ def coarsened(imprinted):
     import copy
 
     from shellmesh_mdao.imprint import coarsen_chains
-    from shellmesh_mdao.project import SurfaceLocator
+    from shellmesh_mdao.core.locator import SurfaceLocator
 
     m, chains, out, res = imprinted
     loc = SurfaceLocator(m.points, m.faces[:, :3])
@@ -294,7 +294,7 @@ def test_split_member_bridges():
     orientation, and chain vertex ids are unchanged."""
     from shellmesh_mdao.imprint import ChainResult, split_member_bridges
     from shellmesh_mdao.mesh import ShellMesh
-    from shellmesh_mdao.project import SurfaceLocator
+    from shellmesh_mdao.core.locator import SurfaceLocator
 
     # two rows of a flat strip: the bottom row is the member's 'lower' chain, the top row its
     # 'upper' chain; every edge between the rows is a bridge except the feature edge 2-5
@@ -336,7 +336,7 @@ def test_refine_chains_bounds_the_chord_deviation(imprinted):
     import copy
 
     from shellmesh_mdao.imprint import refine_chains
-    from shellmesh_mdao.project import SurfaceLocator
+    from shellmesh_mdao.core.locator import SurfaceLocator
 
     m, chains, out, res = imprinted
     res2 = copy.deepcopy(res)
@@ -460,7 +460,7 @@ def test_bridge_across_a_nose_is_flipped_not_split():
     from shellmesh_mdao.imprint.common import tri_angles_min
     from shellmesh_mdao.imprint.cut import split_at_surface_midpoints
     from shellmesh_mdao.mesh import ShellMesh
-    from shellmesh_mdao.project import SurfaceLocator
+    from shellmesh_mdao.core.locator import SurfaceLocator
 
     # input: the half cylinder (x, sin t, cos t), t in [-90, 90] deg, nose line at t = 0
     x, t = np.meshgrid(np.linspace(-1, 1, 41), np.radians(np.linspace(-90, 90, 181)), indexing="ij")
@@ -589,7 +589,7 @@ def test_smooth_round_hint_gives_the_same_moves_and_records_the_triangles():
     hint to the projections: the same moves as without one, and the hint then holds the
     triangle each projected vertex landed on."""
     from shellmesh_mdao.imprint.improve import _smooth_round
-    from shellmesh_mdao.project import SurfaceLocator
+    from shellmesh_mdao.core.locator import SurfaceLocator
 
     m = naca_wing(n_chord=30, n_span=25)
     loc = SurfaceLocator(m.points, m.faces[:, :3])

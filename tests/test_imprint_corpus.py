@@ -26,7 +26,7 @@ from shellmesh_mdao.imprint.common import tri_angles_min
 from shellmesh_mdao.layout import layout_from_manifest
 from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.pipeline import run_pipeline
-from shellmesh_mdao.project import SurfaceLocator
+from shellmesh_mdao.core.locator import SurfaceLocator
 
 SIZES = {"cessna210": 0.25, "swept_wing": 0.02, "straight_wing": 0.02, "bwb": 0.3}
 LAYOUTS = {"2spar": (0.15, 0.65), "3spar": (0.15, 0.4, 0.65)}

@@ -563,7 +563,7 @@ def test_closest_on_triangles_matches_the_numpy_regions():
     # (collinear, a repeated corner, all three corners equal): the same bits wherever the
     # numpy version gave a point; where it gave NaN (a zero-length edge, 0 / 0 in its region)
     # the kernel gives the closest point of the triangle's other edges
-    from shellmesh_mdao.project.kernels import closest_on_triangles
+    from shellmesh_mdao.core.bvh import closest_on_triangles
     rng = np.random.default_rng(600)
     k = 20000
     a, b, c = rng.normal(size=(3, k, 3))
@@ -929,7 +929,7 @@ def test_collapse_select_facing_only_matches_the_numpy_formulas(seed):
     On a wavy, jittered grid whose input is a tilted, partly flipped copy of itself."""
     from shellmesh_mdao.remesh.kernels import collapse_select, facing_ok, greedy_independent_rings
     from shellmesh_mdao.mesh import cross_rows
-    from shellmesh_mdao.project import SurfaceLocator
+    from shellmesh_mdao.core.locator import SurfaceLocator
     from shellmesh_mdao.mesh import dot_norm_rows as _norm, dot_unit_rows as _unit
     from shellmesh_mdao.remesh.common import csr_entries as _expand, tri_normals as _tri_normals
 

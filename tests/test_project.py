@@ -10,8 +10,8 @@ import trimesh
 from shellmesh_mdao.errors import ProjectionError
 from shellmesh_mdao.layout import layout_from_manifest, load_layout
 from shellmesh_mdao.mesh import ShellMesh
-from shellmesh_mdao.project import (SurfaceLocator, closest_point_on_triangles, project_layout, project_polyline,
-                                    project_wing_stations, ray_triangle_intersect)
+from shellmesh_mdao.core.locator import SurfaceLocator, closest_point_on_triangles, ray_triangle_intersect
+from shellmesh_mdao.project import project_layout, project_polyline, project_wing_stations
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "layout.md"
 GEOMS = ["cessna210", "swept_wing", "straight_wing", "bwb"]
@@ -368,7 +368,7 @@ def test_closest_picks_the_lowest_of_equidistant_triangles(make):
 def test_closest_does_not_depend_on_threads_batches_or_order():
     """The answers are the same for one thread and two, for a batch answered in blocks and
     the points one by one, and for the points in reverse order."""
-    from shellmesh_mdao.project.kernels import TriangleBVH
+    from shellmesh_mdao.core.bvh import TriangleBVH
     P, T = sphere(4)                                              # 5120 triangles
     rng = np.random.default_rng(5)
     q = np.vstack([P[rng.integers(0, len(P), 3000)], rng.uniform(-1.5, 1.5, (3000, 3))])
@@ -398,7 +398,7 @@ def test_closest_with_a_hint_gives_the_same_answers(make):
     neighbour, a far or random one, none (-1) or one out of range, the answer is the
     unhinted one bit for bit, ties on vertices and edges (least distance, lowest index)
     included; a hint of the wrong length is refused."""
-    from shellmesh_mdao.project.kernels import TriangleBVH
+    from shellmesh_mdao.core.bvh import TriangleBVH
     P, T = make()
     rng = np.random.default_rng(3)
     q = np.vstack([P[T[:200, 1]], 0.5 * (P[T[:200, 1]] + P[T[:200, 2]]),   # ties on vertices, edges

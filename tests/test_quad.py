@@ -6,7 +6,7 @@ import pytest
 from shellmesh_mdao.errors import MeshValidationError
 from shellmesh_mdao.geometry import naca_wing
 from shellmesh_mdao.mesh import ShellMesh
-from shellmesh_mdao.project import SurfaceLocator
+from shellmesh_mdao.core.locator import SurfaceLocator
 from shellmesh_mdao.quad import planarize, settle_off_surface, subdivide_to_quads
 from shellmesh_mdao.quality import element_quality, scaled_jacobian
 from shellmesh_mdao.core.supports import (CURVE, FIXED, PLANE, SURFACE, Supports, derive_supports,

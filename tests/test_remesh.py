@@ -6,7 +6,7 @@ import pytest
 from shellmesh_mdao.errors import MeshValidationError, SizeError
 from shellmesh_mdao.load import load_surface
 from shellmesh_mdao.mesh import ShellMesh
-from shellmesh_mdao.project import SurfaceLocator
+from shellmesh_mdao.core.locator import SurfaceLocator
 from shellmesh_mdao.remesh import DEFAULT_DEVIATION_FRACTION, improve_triangles, remesh_skin, remesh_statistics
 
 # final quad size H per corpus geometry (the remesher works at 2 H) and a floor under the
@@ -37,7 +37,7 @@ def _best_equidistant_dot(P, T, nin, x, n, diag):
     """Largest dot product of ``n`` with the normals of the input triangles nearest to ``x``
     (all of them within 1e-12 of the model size of the least distance: the sheets of a
     zero-thickness part are equally near)."""
-    from shellmesh_mdao.project.kernels import closest_on_triangles
+    from shellmesh_mdao.core.bvh import closest_on_triangles
     A, B, C = P[T[:, 0]], P[T[:, 1]], P[T[:, 2]]
     d = np.linalg.norm(closest_on_triangles(np.broadcast_to(x, A.shape), A, B, C) - x, axis=1)
     return float((nin[d <= d.min() + 1e-12 * diag] @ n).max())

@@ -10,7 +10,7 @@ import trimesh
 from shellmesh_mdao.errors import MeshValidationError
 from shellmesh_mdao.merge import merge_triangles
 from shellmesh_mdao.mesh import ShellMesh
-from shellmesh_mdao.project import SurfaceLocator
+from shellmesh_mdao.core.locator import SurfaceLocator
 from shellmesh_mdao.quad import subdivide_to_quads
 from shellmesh_mdao.quality import scaled_jacobian
 from shellmesh_mdao.core.supports import (CURVE, FIXED, PLANE, SURFACE, Curve, CurveSet, Supports, derive_supports,

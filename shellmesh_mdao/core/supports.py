@@ -36,7 +36,7 @@ from scipy.spatial import cKDTree
 from ..errors import MeshValidationError, ProjectionError
 from .kernels import chain_walk, closest_on_curves
 from ..mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, unique_edges
-from ..project import SurfaceLocator, closest_point_on_triangles
+from .locator import SurfaceLocator, closest_point_on_triangles
 
 __all__ = ["FIXED", "CURVE", "PLANE", "SURFACE", "KIND_NAMES", "SCAN_SEGMENTS", "SECTION_CACHE_SIZE", "Curve",
            "CurveSet", "Supports", "derive_supports", "polylines_from_edges", "support_normals", "supports_hold",

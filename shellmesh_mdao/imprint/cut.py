@@ -484,7 +484,7 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     when not given) used to put new skin vertices onto it.
     """
     if locator is None:
-        from ..project import SurfaceLocator
+        from ..core.locator import SurfaceLocator
         locator = SurfaceLocator(surface_points, surface_tris)
     if skin.n_quads:
         raise ImprintError("imprint works on a triangle skin; got quads (run it before merging)")

@@ -515,7 +515,7 @@ def _read_inp(p: Path) -> RawMesh:
     names: list[str] = []
     key_to_id: dict[str, int] = {}
     if family:
-        from ..export import inp_elset_names
+        from ..core.formats import inp_elset_names
         k = max(family) + 1
         names = [family.get(i, f"component_{i}") for i in range(k)]
         fake = ShellMesh(np.zeros((0, 3)), np.zeros((0, 4)), component_names=names)

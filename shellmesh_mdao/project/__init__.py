@@ -1,10 +1,10 @@
 """Projection of member curves onto the skin (paper Sec. IV.B, "projection of points").
 
-:class:`SurfaceLocator` answers the two queries of the paper's octree on a triangle
+:class:`~shellmesh_mdao.core.locator.SurfaceLocator` (shared by every stage that queries the input skin) answers the two queries of the paper's octree on a triangle
 surface, vectorised over many query points:
 
 * :meth:`SurfaceLocator.closest` -- the exact closest point of the triangle set
-  (a compiled bounding-volume hierarchy, :class:`~shellmesh_mdao.kernels.TriangleBVH`,
+  (a compiled bounding-volume hierarchy, :class:`~shellmesh_mdao.core.bvh.TriangleBVH`,
   float64, on coordinates shifted to the bounding-box centre). Among equally near
   triangles (a point on a shared edge or vertex) the lowest index is taken, whatever the
   tree, the order of the queries or the number of threads. Measured on the 2-core
@@ -23,17 +23,14 @@ The pipeline functions on top (:func:`project_wing_stations`, :func:`project_pol
 :func:`project_layout`) turn a :class:`~shellmesh_mdao.layout.Layout` into projected
 seed points on the skin.
 
-Modules: ``locator`` (:class:`SurfaceLocator` and the row-wise triangle queries),
-``seeds`` (the projection of the layout's members and the spar-height check). The compiled
-(numba) kernels they call (the BVH, the closest point on triangles) are in
-:mod:`shellmesh_mdao.kernels`.
+Modules: ``seeds`` (the projection of the layout's members and the spar-height check). The
+locator and its compiled kernels are shared helpers: :mod:`shellmesh_mdao.core.locator`,
+:mod:`shellmesh_mdao.core.bvh`.
 """
 from __future__ import annotations
 
-from .locator import SurfaceLocator, closest_point_on_triangles, ray_triangle_intersect
 from .seeds import (MIN_MEMBER_HEIGHT, ProjectedMember, check_member_heights, project_layout, project_polyline,
                     project_wing_stations)
 
-__all__ = ["SurfaceLocator", "closest_point_on_triangles", "ray_triangle_intersect",
-           "project_wing_stations", "project_polyline", "project_layout", "ProjectedMember", "MIN_MEMBER_HEIGHT",
+__all__ = ["project_wing_stations", "project_polyline", "project_layout", "ProjectedMember", "MIN_MEMBER_HEIGHT",
            "check_member_heights"]

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import ProjectionError
 from ..mesh import norm_rows
-from .locator import SurfaceLocator
+from ..core.locator import SurfaceLocator
 
 __all__ = ["project_wing_stations", "project_polyline", "project_layout", "ProjectedMember", "MIN_MEMBER_HEIGHT",
            "check_member_heights"]

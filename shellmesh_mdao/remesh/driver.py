@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import MeshValidationError, SizeError
 from .kernels import edge_lengths, group_order
 from ..mesh import ShellMesh, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
-from ..project import SurfaceLocator
+from ..core.locator import SurfaceLocator
 from .common import CORNER, REGULAR, SPLIT_RATIO, tri_angles
 from .operations import collapse_edges, collapse_round, faces_facing_ok, flip_round, micro_round, phase, split_round
 from .relax import relax_vertices

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import MeshValidationError, SizeError
 from ..mesh import ShellMesh
-from ..project import SurfaceLocator
+from ..core.locator import SurfaceLocator
 from .common import CORNER, REGULAR, EdgeTable
 from .operations import flip_round, phase
 from .relax import relax_vertices

@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit
 from ..core.kernels import (by_resource, check_index, counting_order, cross3, dense_rank, dot3e, edge_id, first_wave,
                             next_wave, select)
-from ..project.kernels import bvh_closest
+from ..core.bvh import bvh_closest
 
 __all__ = ["greedy_independent_rings", "common_neighbour_counts", "group_order", "edge_neighbours", "rank_desc",
            "collapse_directions", "collapse_apply", "collapse_select", "flip_candidates", "move_tests",

@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 from ..errors import MeshValidationError
 from .kernels import edge_lengths, group_order
 from ..mesh import ShellMesh, bbox_diagonal, dot_norm_rows, dot_rows, dot_unit_rows
-from ..project import SurfaceLocator, closest_point_on_triangles
+from ..core.locator import SurfaceLocator, closest_point_on_triangles
 from .common import CHAIN, CORNER, EdgeTable, tri_normals
 
 __all__ = ["InputSurface", "project_compatible"]

@@ -1,13 +1,14 @@
-"""Compiled kernels of the project stage: exact closest points on triangles and the bounding-volume
-hierarchy (:class:`TriangleBVH`) that answers every closest-point query on the input skin.
+"""Compiled kernels of the closest-point queries on the input skin: exact closest points on triangles and the
+bounding-volume hierarchy (:class:`TriangleBVH`) behind :class:`~shellmesh_mdao.core.locator.SurfaceLocator`, which
+the projection, the remesh, the imprint and the node supports all query.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from ..core.threads import Background
-from ..core.kernels import clip01, dot3, sq_dist
+from .threads import Background
+from .kernels import clip01, dot3, sq_dist
 
 __all__ = ["closest_on_triangles", "bvh_closest", "TriangleBVH"]
 

@@ -19,7 +19,7 @@ def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: n
     (k, 3) float64 (or broadcastable); returns (k, 3). Degenerate triangles (zero area) go
     to the nearest of their three edges. A compiled loop
     (:func:`~shellmesh_mdao.kernels.closest_on_triangles`)."""
-    from .kernels import closest_on_triangles          # numba: imported on first use
+    from .bvh import closest_on_triangles          # numba: imported on first use
     return closest_on_triangles(p, a, b, c)
 
 
@@ -112,7 +112,7 @@ class SurfaceLocator:
         """The compiled bounding-volume hierarchy of the triangles
         (:class:`~shellmesh_mdao.kernels.TriangleBVH`), built on the first query."""
         if self._bvh is None:
-            from .kernels import TriangleBVH          # numba: imported on first use
+            from .bvh import TriangleBVH          # numba: imported on first use
             self._bvh = TriangleBVH(self._local, self.triangles)
         return self._bvh
 
