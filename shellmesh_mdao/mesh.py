@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from .core import kernels as _k
 from .errors import MeshValidationError
+from .families import padded_names
 
 __all__ = ["ShellMesh", "EdgeTopology", "MeshCheck", "concatenate", "merge_close_points", "vertex_faces",
            "cross_rows", "reduce_short", "norm_rows", "dot_rows", "dot_norm_rows", "dot_unit_rows"]
@@ -269,7 +270,7 @@ class ShellMesh:
         ncomp = int(self.component.max()) + 1 if m else 0
         self.component_names = [str(s) for s in self.component_names]
         if len(self.component_names) < ncomp:
-            self.component_names += [f"component_{i}" for i in range(len(self.component_names), ncomp)]
+            self.component_names = padded_names(self.component_names, ncomp)
         if self.fixed_vertices is None:
             self.fixed_vertices = np.zeros(0, dtype=np.int64)
         self.fixed_vertices = np.unique(np.asarray(self.fixed_vertices, dtype=np.int64).reshape(-1))
