@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SolverError
+from .families import LOWER_SKIN_PATTERN, ROOT_RIB_PATTERN
 from .export import export_order, inp_elset_names, inp_mesh_lines, resolve_material, resolve_thickness, \
     write_text_atomic
 from .mesh import ShellMesh
@@ -58,9 +59,6 @@ ANALYSIS_MATERIAL = {"name": "ALUMINIUM", "E": 70.0e9, "nu": 0.33, "rho": 2700.0
 
 #: ``element`` option -> (quad type, triangle type) written to the deck.
 ELEMENT_TYPES = {"linear": ("S4", "S3"), "quadratic": ("S8R", "S6")}
-
-#: The families loaded by the default pressure load case.
-LOWER_SKIN_PATTERN = "*/lower_skin/bay_*"
 
 #: How to get CalculiX; part of every "ccx not found" message.
 CCX_INSTALL_HINT = ("install CalculiX with `apt-get install calculix-ccx` (Debian/Ubuntu; the binary is `ccx`), "
@@ -189,7 +187,7 @@ def clamped_nodes(mesh: ShellMesh, rule="root", *, layout=None, axis=None, tol: 
         root = c[used].min()
         return np.flatnonzero(used & (c <= root + tol)).astype(np.int64)
     if rule == "root_rib":
-        fam = family_ids(mesh, "*/rib_0")
+        fam = family_ids(mesh, ROOT_RIB_PATTERN)
         if not len(fam):
             raise SolverError("clamp='root_rib' needs a family named '<wing>/rib_0' (the root rib) in the mesh; "
                               f"the families are {list(mesh.component_names)}: use clamp='root' or give node ids")

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from .errors import InputFileError, LayoutError
+from .families import SKIN, THICKNESS_FAMILIES, component_family, name_and_parents, parse_component
 
 __all__ = ["ConfigError", "StudyConfig", "CONFIG_KEYS", "REPORT_FORMATS", "THICKNESS_FAMILIES", "solver_options",
            "thickness_by_component", "check_thickness_names",
@@ -181,11 +182,6 @@ def _stages() -> tuple:
     return tuple(STAGES)
 
 
-#: Family keys a ``thickness`` mapping may use besides component names.
-THICKNESS_FAMILIES = {"skin": "skin", "upper_skin": "upper skin", "lower_skin": "lower skin", "ribs": "rib",
-                      "spars": "spar", "members": "member"}
-
-
 def thickness_by_component(thickness, names) -> float | dict | None:
     """Resolve a config ``thickness`` for the components ``names``: a number stays a number;
     a mapping may name components (``wing/rib_3``, which covers its segments
@@ -195,13 +191,10 @@ def thickness_by_component(thickness, names) -> float | dict | None:
     component name -> thickness for :func:`~shellmesh_mdao.export.write_mesh`."""
     if thickness is None or not isinstance(thickness, dict):
         return thickness
-    from .render import component_family
-
     inv = {v: k for k, v in THICKNESS_FAMILIES.items()}
     out = {}
     for n in names:
-        parts = n.split("/")
-        prefixes = ["/".join(parts[:i]) for i in range(len(parts), 0, -1)]   # the name, then its parents
+        prefixes = name_and_parents(n)
         hit = next((p for p in prefixes if p in thickness and p not in THICKNESS_FAMILIES), None)
         if hit is not None:                  # a member's segments take the member's thickness
             out[n] = thickness[hit]
@@ -217,23 +210,28 @@ def check_thickness_names(thickness, layout, source=None) -> None:
     produce (a typo found only at export would waste the whole run)."""
     if not isinstance(thickness, dict):
         return
-    import re
-
     from .layout import load_layout
 
     lay = load_layout(layout if isinstance(layout, dict) else str(layout))
     members = {m.name for m in lay.members()}
     wings = {w.name for w in lay.wings}
-    bay = re.compile(r"^(.+)/(upper|lower)_skin/bay_\d+$")
     for k in thickness:
-        m = bay.match(k)
-        if k in THICKNESS_FAMILIES or k == "default" or k in members or (m and m.group(1) in wings):
+        if k in THICKNESS_FAMILIES or k == "default" or k in members or _is_bay_of(k, wings):
             continue
         close = difflib.get_close_matches(k, sorted(members) + list(THICKNESS_FAMILIES) + ["default"], n=1)
         hint = f"did you mean '{close[0]}'?" if close else (
             "use a family (" + ", ".join(THICKNESS_FAMILIES) + ", default) or a component name such as "
-            + (sorted(members)[0] if members else "skin"))
+            + (sorted(members)[0] if members else SKIN))
         raise ConfigError(f"{_where(source)}: key 'thickness.{k}' names no component of this layout; {hint}")
+
+
+def _is_bay_of(key, wings) -> bool:
+    """True when ``key`` names a skin bay (``<wing>/upper_skin/bay_<k>``) of one of ``wings``."""
+    try:
+        c = parse_component(key)
+    except LayoutError:
+        return False
+    return c.kind == "skin_bay" and c.wing in wings
 
 
 # ----------------------------------------------------------------------------- public API

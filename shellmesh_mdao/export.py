@@ -36,6 +36,7 @@ import numpy as np
 
 from .errors import OutputError, ShellMeshError
 from .core.formats import inp_elset_names, n_components, sanitise_name
+from .families import padded_names, unnamed_name
 from .mesh import ShellMesh
 
 __all__ = [
@@ -165,7 +166,7 @@ def bdf_family_name(name: str, cid: int) -> str:
     takes the comment's last word, so whitespace becomes ``_``."""
     s = re.sub(r"\s+", "_", name.strip()).encode("ascii", "replace").decode().replace("?", "_")
     s = re.sub("(?i)pynastran", "py_nastran", s)
-    return s or f"component_{cid}"
+    return s or unnamed_name(cid)
 
 
 def _json_name(name: str) -> str:
@@ -321,7 +322,7 @@ def _write_bdf(mesh: ShellMesh, path: Path, thickness: np.ndarray, mat: dict) ->
     if mesh.n_points > 99_999_999 or mesh.n_faces > 99_999_999:
         raise OutputError("the mesh has more than 99,999,999 nodes or elements, which small-field "
                           "CQUAD4/CTRIA3 cards cannot number; write .vtu or .msh instead")
-    names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), k)]
+    names = padded_names(mesh.component_names, k)
     model = BDF(debug=None)
     mid = 1
     model.add_mat1(mid, float(mat["E"]), None if mat.get("G") is None else float(mat["G"]),
@@ -384,7 +385,7 @@ def inp_mesh_lines(mesh: ShellMesh, thickness=None, material: dict | None = None
     mat = resolve_material(material)
     k = len(t)
     elsets = inp_elset_names(mesh)
-    names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), k)]
+    names = padded_names(mesh.component_names, k)
     matname = sanitise_name(mat["name"], 80, set(), "MATERIAL")
     order = export_order(mesh)
     faces = mesh.faces[order]
@@ -456,7 +457,7 @@ def _write_vtu(mesh: ShellMesh, path: Path, quality: dict) -> None:
     meshio.write(str(path), m, file_format="vtu")
     # meshio's VTU writer drops field data: add the component-name table ourselves
     k = n_components(mesh)
-    names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), k)]
+    names = padded_names(mesh.component_names, k)
     fd = "<FieldData>\n" + "".join(
         f'<DataArray type="Int32" Name={quoteattr(_one_line(n))} NumberOfTuples="1" format="ascii">{i}'
         f"</DataArray>\n" for i, n in enumerate(names)) + "</FieldData>\n"
@@ -495,7 +496,7 @@ def _write_msh(mesh: ShellMesh, path: Path) -> None:
     faces = mesh.faces[order]
     comp = mesh.component[order]
     k = max(n_components(mesh), 1)
-    names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), k)]
+    names = padded_names(mesh.component_names, k)
     starts = np.searchsorted(comp, np.arange(k + 1))
     pts = mesh.points
     lo = pts.min(0) if len(pts) else np.zeros(3)

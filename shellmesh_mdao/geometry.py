@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import SizeError
+from .families import SKIN
 from .mesh import ShellMesh
 
 __all__ = ["naca4", "naca_wing", "naca_wing_layout", "DEFAULT_WING"]
@@ -97,12 +98,12 @@ def naca_wing(span: float = DEFAULT_WING["span"], root_chord: float = DEFAULT_WI
     root = _cap(pts[:k], af, flip=False, offset=0)
     tip = _cap(pts[-k:], af, flip=True, offset=(n_span - 1) * k)
     faces = np.vstack([tris, root, tip])
-    m = ShellMesh(pts, faces, np.zeros(len(faces), np.int32), ["skin"])
+    m = ShellMesh(pts, faces, np.zeros(len(faces), np.int32), [SKIN])
     # orient outward: signed volume must be positive
     v = m.points[m.faces[:, :3]]
     vol = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0
     if vol < 0:
-        m = ShellMesh(pts, faces[:, ::-1], m.component, ["skin"])
+        m = ShellMesh(pts, faces[:, ::-1], m.component, [SKIN])
     return m
 
 

@@ -62,6 +62,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import MeshValidationError
+from .families import is_member
 from .quad.finish import POOR_JACOBIAN
 from .quality import element_quality
 from .core.supports import FIXED, PLANE, SURFACE
@@ -86,7 +87,7 @@ def member_faces(mesh, infos) -> np.ndarray:
     """(m,) bool per face of ``mesh``: True for member faces (components named after a member
     of ``infos``, the pipeline's member list, or one of its ``/seg_<j>`` pieces)."""
     members = {m.name for m in infos}
-    names = np.array([c.split("/seg_")[0] in members for c in mesh.component_names], bool)
+    names = np.array([is_member(c, members) for c in mesh.component_names], bool)
     return names[mesh.component]
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import LayoutError, SizeError
+from .families import check_plain_name, rib_name, spar_name
 from .mesh import norm_rows
 
 __all__ = ["Layout", "WingLayout", "ExplicitMember", "MemberSpec", "load_layout", "layout_from_manifest",
@@ -103,15 +104,6 @@ def _number_list(x, where) -> tuple:
     if not isinstance(x, (list, tuple)):
         raise LayoutError(f"{where} must be a list of numbers, got {type(x).__name__} {x!r}")
     return tuple(_number(v, f"{where}[{i}]") for i, v in enumerate(x))
-
-
-def _name(x, where) -> str:
-    if not isinstance(x, str) or not x.strip():
-        raise LayoutError(f"{where} must be a non-empty string, got {x!r}")
-    if "/" in x:
-        raise LayoutError(f"{where} = {x!r} must not contain '/': member names are '<wing>/rib_<k>'; "
-                          "rename it")
-    return x
 
 
 def _unit(v) -> np.ndarray:
@@ -382,7 +374,8 @@ class Layout:
                 j = int(np.argmin(gap))
                 if gap[j] < size:
                     raise LayoutError(
-                        f"spars '{w.name}/spar_{j}' (c={c[j]:g}) and '{w.name}/spar_{j + 1}' (c={c[j + 1]:g}) "
+                        f"spars '{spar_name(w.name, j)}' (c={c[j]:g}) and '{spar_name(w.name, j + 1)}' "
+                        f"(c={c[j + 1]:g}) "
                         f"are {gap[j]:.4g} apart, closer than the element size {size:g}: move them apart "
                         "or use a smaller element size")
         return self
@@ -471,7 +464,7 @@ def _wing_members(w: WingLayout, up: np.ndarray) -> list:
     c = np.asarray(w.spar_chord, dtype=np.float64)
     if len(c) >= 2:
         ca, cb = float(c[0]), float(c[-1])
-        rib_bounds = (f"{w.name}/spar_0", f"{w.name}/spar_{len(c) - 1}")
+        rib_bounds = (spar_name(w.name, 0), spar_name(w.name, len(c) - 1))
     else:
         ca, cb = 0.0, 1.0
         rib_bounds = ("LE", "TE")
@@ -492,7 +485,7 @@ def _wing_members(w: WingLayout, up: np.ndarray) -> list:
     if len(eta):
         first_plane = (rib_pts[0], n_rib)
         last_plane = (rib_pts[-1], n_rib)
-        spar_bounds = (f"{w.name}/rib_0", f"{w.name}/rib_{len(eta) - 1}")
+        spar_bounds = (rib_name(w.name, 0), rib_name(w.name, len(eta) - 1))
     else:
         first_plane = (w.chord_point(0.0, cmid), n_rib)
         last_plane = (w.chord_point(1.0, cmid), n_rib)
@@ -502,7 +495,7 @@ def _wing_members(w: WingLayout, up: np.ndarray) -> list:
         e0 = float(w.eta_on_plane(c[j], *first_plane)) if len(eta) else 0.0
         e1 = float(w.eta_on_plane(c[j], *last_plane)) if len(eta) else 1.0
         out.append(MemberSpec(
-            name=f"{w.name}/spar_{j}", kind="spar", wing=w.name, index=j, parameter=float(c[j]),
+            name=spar_name(w.name, j), kind="spar", wing=w.name, index=j, parameter=float(c[j]),
             plane_point=r, plane_normal=nrm, up=up.copy(),
             start=w.chord_point(e0, c[j]), end=w.chord_point(e1, c[j]), root_point=r, tip_point=t,
             bounds=spar_bounds,
@@ -517,7 +510,7 @@ def _wing_members(w: WingLayout, up: np.ndarray) -> list:
         else:
             bp = ()
         out.append(MemberSpec(
-            name=f"{w.name}/rib_{k}", kind="rib", wing=w.name, index=k, parameter=float(e),
+            name=rib_name(w.name, k), kind="rib", wing=w.name, index=k, parameter=float(e),
             plane_point=p, plane_normal=n_rib.copy(), up=up.copy(),
             start=w.chord_point(ea, ca), end=w.chord_point(eb, cb), bounds=rib_bounds, bound_planes=bp,
             chord_range=(ca, cb), wing_layout=w))
@@ -581,7 +574,7 @@ def _parse_wing(d, i) -> WingLayout:
     if isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"].strip():
         where = f"wings[{i}] ('{d['name']}')"
     _check_keys(d, _WING_KEYS, _WING_REQUIRED, where)
-    name = _name(d["name"], f"{where}.name")
+    name = check_plain_name(d["name"], f"{where}.name")
     pts = {k: _vec3(d[k], f"{where}.{k}") for k in ("root_le", "root_te", "tip_le", "tip_te")}
     up = None
     if d.get("up") is not None:
@@ -641,7 +634,7 @@ def _parse_member(d, i) -> ExplicitMember:
     if isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"].strip():
         where = f"members[{i}] ('{d['name']}')"
     _check_keys(d, _MEMBER_KEYS, _MEMBER_REQUIRED, where)
-    name = _name(d["name"], f"{where}.name")
+    name = check_plain_name(d["name"], f"{where}.name")
     upper = _parse_polyline(d["upper"], f"{where}.upper")
     lower = _parse_polyline(d["lower"], f"{where}.lower")
     dirs = {}

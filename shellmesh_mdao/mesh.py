@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import MeshValidationError
+from .families import padded_names
 
 
 class _KernelsOnFirstUse:
@@ -282,7 +283,7 @@ class ShellMesh:
         ncomp = int(self.component.max()) + 1 if m else 0
         self.component_names = [str(s) for s in self.component_names]
         if len(self.component_names) < ncomp:
-            self.component_names += [f"component_{i}" for i in range(len(self.component_names), ncomp)]
+            self.component_names = padded_names(self.component_names, ncomp)
         if self.fixed_vertices is None:
             self.fixed_vertices = np.zeros(0, dtype=np.int64)
         self.fixed_vertices = np.unique(np.asarray(self.fixed_vertices, dtype=np.int64).reshape(-1))

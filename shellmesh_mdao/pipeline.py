@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import SizeError, ShellMeshError
+from .families import SKIN
 from .mesh import ShellMesh, norm_rows
 
 log = logging.getLogger("shellmesh_mdao")
@@ -337,7 +338,7 @@ def stage_load(surface, size, options=None) -> PipelineState:
     h = check_size(size, skin_in.diagonal)
     if skin_in.n_quads:
         tris, _ = skin_in.triangles()
-        skin_in = ShellMesh(skin_in.points, tris, np.zeros(len(tris), np.int32), ["skin"])
+        skin_in = ShellMesh(skin_in.points, tris, np.zeros(len(tris), np.int32), [SKIN])
     locator = SurfaceLocator(skin_in.points, skin_in.faces[:, :3])
     return PipelineState(h, opts, report, surface=skin_in, locator=locator, mesh=skin_in, stage="load")
 

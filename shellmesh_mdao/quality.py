@@ -45,6 +45,7 @@ import math
 import numpy as np
 
 from .errors import MeshValidationError
+from .families import name_of
 from .mesh import ShellMesh, reduce_short
 
 __all__ = [
@@ -474,7 +475,7 @@ def quality_summary(mesh_or_arrays, by_component: bool = False, acceptance: dict
         comps = {}
         present = np.unique(mesh.component)
         for cid in present.tolist():
-            name = mesh.component_names[cid] if cid < len(mesh.component_names) else f"component_{cid}"
+            name = name_of(mesh.component_names, cid)
             comps[name] = _summarise(metrics, masks, is_tri, mesh.component == cid)
         out["components"] = comps
     return out

@@ -21,7 +21,6 @@ from __future__ import annotations
 import ctypes.util
 import logging
 import os
-import re
 import sys
 import time
 from pathlib import Path
@@ -29,11 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from .errors import OutputError
+from .families import BOX_FAMILIES, component_family, name_head
 from .mesh import ShellMesh
 from .quality import ACCEPTANCE, METRICS, element_quality
 
 log = logging.getLogger("shellmesh_mdao")
 
+# component_family is re-exported from .families (its home)
 __all__ = ["COLOR_OPTIONS", "VIEWS", "FAMILY_COLORS", "component_family", "component_colors",
            "element_ids", "worst_elements", "to_pyvista", "load_any", "render_mesh", "render_worst",
            "render_worst_closeups", "render_views", "check_offscreen", "OFFSCREEN_HELP"]
@@ -126,30 +127,6 @@ def check_offscreen() -> None:
             _probe_result = (False, f"a test render could not run ({type(e).__name__})")
     if not _probe_result[0]:
         raise OutputError(f"no working off-screen OpenGL ({_probe_result[1]}); " + OFFSCREEN_HELP)
-
-
-def component_family(name: str) -> str:
-    """Family of a component name: ``'upper skin'``, ``'lower skin'`` (``<wing>/upper_skin/bay_k``),
-    ``'rib'``, ``'spar'`` (``<wing>/rib_k``, ``<wing>/spar_k``, and their segments
-    ``<wing>/spar_k/seg_j``), ``'skin'`` (``skin``, the skin
-    outside the wing boxes) or ``'member'`` (explicit members and anything else)."""
-    parts = str(name).split("/")
-    if "upper_skin" in parts:
-        return "upper skin"
-    if "lower_skin" in parts:
-        return "lower skin"
-    for part in parts[1:] or parts:      # "<wing>/rib_3", "<wing>/spar_1/seg_2"
-        if _RIB.match(part):
-            return "rib"
-        if _SPAR.match(part):
-            return "spar"
-    if "skin" in parts[-1]:
-        return "skin"
-    return "member"
-
-
-_RIB = re.compile(r"^rib(_\d+)?$")
-_SPAR = re.compile(r"^spar(_\d+)?$")
 
 
 def component_colors(names) -> tuple[np.ndarray, list[str]]:
@@ -369,17 +346,17 @@ def _box_faces(mesh: ShellMesh, fam: list[str]):
     box (upper/lower skin bays, ribs or spars)."""
     names = mesh.component_names
     fam_arr = np.array(fam + ["member"] * max(0, int(mesh.component.max(initial=-1)) + 1 - len(fam)))
-    box_c = [i for i, f in enumerate(fam) if f in ("upper skin", "lower skin", "rib", "spar")]
+    box_c = [i for i, f in enumerate(fam) if f in BOX_FAMILIES]
     if not box_c:
         return None, None, None
     present = set(np.unique(mesh.component).tolist())
     box_c = [i for i in box_c if i in present]
     if not box_c:
         return None, None, None
-    wing = names[box_c[0]].split("/")[0] if "/" in names[box_c[0]] else ""
-    in_wing = np.array([(n.split("/")[0] == wing) if wing else True for n in names] + [False] * (len(fam_arr) - len(names)))
+    wing = name_head(names[box_c[0]]) if "/" in names[box_c[0]] else ""
+    in_wing = np.array([(name_head(n) == wing) if wing else True for n in names] + [False] * (len(fam_arr) - len(names)))
     cf = fam_arr[mesh.component]
-    box = np.isin(cf, ["upper skin", "lower skin", "rib", "spar"]) & in_wing[mesh.component]
+    box = np.isin(cf, list(BOX_FAMILIES)) & in_wing[mesh.component]
     upper = np.isin(cf, ["upper skin"])
     return wing, box, upper
 

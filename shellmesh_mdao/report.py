@@ -25,6 +25,7 @@ import numpy as np
 
 from . import __version__
 from .errors import OutputError
+from .families import FAMILIES, component_family, name_of, padded_names
 from .mesh import ShellMesh
 from .quality import ACCEPTANCE, METRICS, QUAD_ANGLE_RANGE, acceptance_masks, element_quality, quality_summary
 
@@ -36,7 +37,6 @@ __all__ = ["report_data", "family_counts", "worst_table", "flagged_table", "comp
 #: Extensions :func:`write_report` writes and their format.
 REPORT_EXTENSIONS = {".html": "html", ".htm": "html", ".md": "markdown", ".markdown": "markdown"}
 
-_FAMILY_ORDER = ("skin", "upper skin", "lower skin", "rib", "spar", "member")
 _HIST_METRICS = ("scaled_jacobian", "min_angle", "max_angle", "aspect", "skew", "warp")
 _HIST_RANGE = {"scaled_jacobian": (-0.2, 1.0), "min_angle": (0.0, 90.0), "max_angle": (60.0, 180.0),
                "aspect": (1.0, 8.0), "skew": (0.0, 90.0), "warp": (0.0, 30.0)}
@@ -50,15 +50,13 @@ def family_counts(mesh: ShellMesh) -> dict:
     """Element counts per component family (skin, upper skin, lower skin, rib, spar, member):
     ``{family: {"components", "elements", "quads", "tris"}}`` in that order, families with
     elements only."""
-    from .render import component_family
-
     ncomp = max(len(mesh.component_names), int(mesh.component.max(initial=-1)) + 1)
-    names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), ncomp)]
+    names = padded_names(mesh.component_names, ncomp)
     fam = np.array([component_family(n) for n in names] or ["skin"])
     per_c = np.bincount(mesh.component, minlength=ncomp)
     per_cq = np.bincount(mesh.component[mesh.is_quad], minlength=ncomp)
     out = {}
-    for f in _FAMILY_ORDER:
+    for f in FAMILIES:
         sel = (fam == f) & (per_c > 0)
         if sel.any():
             out[f] = {"components": int(sel.sum()), "elements": int(per_c[sel].sum()),
@@ -78,7 +76,7 @@ def _element_rows(mesh: ShellMesh, idx: np.ndarray, q: dict) -> list[dict]:
     for r, i in enumerate(np.asarray(idx).tolist()):
         c = int(mesh.component[i])
         rows.append({"rank": r + 1, "element_id": int(eid[i]), "index": int(i),
-                     "component": mesh.component_names[c] if c < len(mesh.component_names) else f"component_{c}",
+                     "component": name_of(mesh.component_names, c),
                      "type": "quad" if mesh.faces[i, 3] >= 0 else "tri",
                      **{k: _num(q[k][i]) for k in METRICS},
                      "failed": [k for k in METRICS if not masks[k][i]],
@@ -269,8 +267,6 @@ def component_rows(qs: dict) -> tuple[list[str], list[list[str]], list[bool]]:
 
 
 def _component_rows(qs: dict) -> list[tuple[list[str], bool]]:
-    from .render import component_family
-
     rows = []
     for name, s in (qs.get("components") or {}).items():
         rows.append(([name, component_family(name), _f(s["n_elements"]), _f(s["n_quads"]), _f(s["n_tris"]),

@@ -32,8 +32,8 @@ final quads have edges of about ``size`` -- what the pipeline does too (remesh a
 for both.
 
 Quality figures (:func:`~shellmesh_mdao.benchmarks.figures.mesh_figures`) are computed with
-:mod:`shellmesh_mdao.quality` on both meshes; members are the components whose names contain
-``/rib_`` or ``/spar_``, the rest is skin. :data:`~shellmesh_mdao.benchmarks.figures.TARGETS` are
+:mod:`shellmesh_mdao.quality` on both meshes; members are the ribs and spars (``<wing>/rib_<k>``,
+``<wing>/spar_<j>`` and their pieces), the rest is skin. :data:`~shellmesh_mdao.benchmarks.figures.TARGETS` are
 the issue's acceptance targets; :func:`~shellmesh_mdao.benchmarks.figures.target_checks` gives
 pass/fail per geometry.
 
@@ -203,6 +203,7 @@ def gmsh_quad_remesh(surface, size: float, feature_angle: float = GMSH_FEATURE_A
 def run_gmsh(surface, size: float, feature_angle: float = GMSH_FEATURE_ANGLE) -> dict:
     """:func:`gmsh_quad_remesh` of ``surface`` timed (wall and CPU) with :func:`mesh_figures`
     of its mesh (all skin). Run it in a fresh process (:func:`run_in_child`)."""
+    from ..families import SKIN
     from ..mesh import ShellMesh
 
     gmsh = import_gmsh()            # imported before the clock starts, like the pipeline's modules
@@ -213,7 +214,7 @@ def run_gmsh(surface, size: float, feature_angle: float = GMSH_FEATURE_ANGLE) ->
     remap = np.full(len(points), -1, np.int64)
     remap[used] = np.arange(len(used))
     faces = np.where(faces >= 0, remap[np.maximum(faces, 0)], -1)
-    mesh = ShellMesh(points[used], faces, np.zeros(len(faces), np.int32), ["skin"])
+    mesh = ShellMesh(points[used], faces, np.zeros(len(faces), np.int32), [SKIN])
     return {"wall_s": seconds, "cpu_s": cpu, "gmsh_version": gmsh.__version__,
             "options": {"feature_angle": feature_angle, "Mesh.Algorithm": 8, "Mesh.RecombinationAlgorithm": 1,
                         "Mesh.SubdivisionAlgorithm": 1, "Mesh.MeshSize": 2.0 * size},

@@ -2,13 +2,15 @@
 
 :func:`mesh_figures` measures a :class:`~shellmesh_mdao.mesh.ShellMesh` with
 :mod:`shellmesh_mdao.quality` (element counts, scaled Jacobian, corner angles, warp, edge
-lengths); members are the components whose names contain ``/rib_`` or ``/spar_``
-(:func:`member_face_mask`), the rest is skin. :data:`TARGETS` are the issue's acceptance
-targets and :func:`target_checks` gives pass/fail per figure.
+lengths); members are the ribs and spars, ``<wing>/rib_<k>``, ``<wing>/spar_<j>`` and their
+``/seg_<i>`` pieces (:func:`member_face_mask`), the rest is skin. :data:`TARGETS` are the
+issue's acceptance targets and :func:`target_checks` gives pass/fail per figure.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from ..families import is_rib_or_spar
 
 __all__ = ["TARGETS", "member_face_mask", "mesh_figures", "target_checks"]
 
@@ -26,9 +28,9 @@ TARGETS = {
 
 
 def member_face_mask(component: np.ndarray, component_names) -> np.ndarray:
-    """(m,) bool: True for the faces of a member (component name containing ``/rib_`` or
-    ``/spar_``), False for skin."""
-    is_member = np.array([("/rib_" in n) or ("/spar_" in n) for n in component_names], bool)
+    """(m,) bool: True for the faces of a member (a rib or spar component or one of its pieces,
+    :func:`~shellmesh_mdao.families.is_rib_or_spar`), False for skin."""
+    is_member = np.array([is_rib_or_spar(n) for n in component_names], bool)
     if not len(is_member):
         return np.zeros(len(component), bool)
     return is_member[np.asarray(component)]

@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ShellMeshError
+from ..families import rib_name, spar_name
 from ..guarantees import check_guarantees
 from .child import run_in_child
 from .corpus import CORPUS_SIZES
@@ -309,7 +310,7 @@ def layout_tightness(manifest: dict, case: dict, geometry_dir) -> dict:
                 wedge = min(wedge, _section_corner(geometry_dir, f, p, n))
         for k, pts in enumerate(rib_curves):
             if _outside(geometry_dir, f, pts, up).any():
-                outside.append(f"{w['name']}/rib_{k}")
+                outside.append(rib_name(w["name"], k))
         if len(eta):
             ends = [_first_hit(geometry_dir, f, rib_curves[0][::2], -n).min(),
                     _first_hit(geometry_dir, f, rib_curves[-1][::2], n).min()]
@@ -318,7 +319,7 @@ def layout_tightness(manifest: dict, case: dict, geometry_dir) -> dict:
             e0, e1 = (eta_on(cj, planes[0]), eta_on(cj, planes[-1])) if len(eta) else (0.0, 1.0)
             pts = S(e0 + (e1 - e0) * tt, cj)
             if _outside(geometry_dir, f, pts, up).any():
-                outside.append(f"{w['name']}/spar_{j}")
+                outside.append(spar_name(w["name"], j))
             else:
                 web = _first_hit(geometry_dir, f, pts, up) + _first_hit(geometry_dir, f, pts, -up)
                 spar_height = min(spar_height, float(web.min()) / h)

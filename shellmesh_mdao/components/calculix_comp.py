@@ -20,9 +20,10 @@ from __future__ import annotations
 import numpy as np
 import openmdao.api as om
 
-from ..analysis import ANALYSIS_MATERIAL, ELEMENT_TYPES, LOWER_SKIN_PATTERN, analyse_shell, clamped_nodes, \
-    find_ccx, n_families, resolve_up
+from ..analysis import ANALYSIS_MATERIAL, ELEMENT_TYPES, analyse_shell, clamped_nodes, find_ccx, n_families, \
+    resolve_up
 from ..export import DEFAULT_THICKNESS, resolve_material
+from ..families import LOWER_SKIN_PATTERN, padded_names
 from ..mesh import ShellMesh
 from .layout_comp import case_errors
 from .mass_comp import discrete_family_names, mapped_family_values
@@ -100,8 +101,7 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         else:
             self._clamped = clamped_nodes(mesh, o["clamp"], layout=layout, axis=o["axis"], tol=o["clamp_tol"])
             n = n_families(mesh)
-            self.family_names = list(mesh.component_names) + [
-                f"component_{i}" for i in range(len(mesh.component_names), n)]
+            self.family_names = padded_names(mesh.component_names, n)
         self.last_result = None
         self.add_input("thickness", val=np.full(n, float(o["thickness"])), shape=(n,),
                        desc="shell thickness of each family, in mesh.component_names order")
@@ -131,7 +131,7 @@ class CalculixShellAnalysis(om.ExplicitComponent):
             self._clamped = clamped_nodes(mesh, o["clamp"], layout=self._layout, axis=o["axis"], tol=o["clamp_tol"])
         pos = {name: i for i, name in enumerate(self.family_names)}
         nm = n_families(mesh)
-        names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names), nm)]
+        names = padded_names(mesh.component_names, nm)
         mapped_family_values(self, mesh, np.zeros(nm))     # every family with faces must be named
         self._mesh_pos = np.array([pos.get(name, -1) for name in names], dtype=np.int64)
         counts = np.bincount(mesh.component, minlength=nm)

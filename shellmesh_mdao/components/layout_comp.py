@@ -27,6 +27,7 @@ import numpy as np
 import openmdao.api as om
 
 from ..errors import LayoutError, ShellMeshError
+from ..families import SIDES, SKIN, bay_name
 from ..layout import Layout, load_layout
 
 __all__ = ["LayoutComp", "StageComp", "case_errors", "family_names", "layout_input_names"]
@@ -54,10 +55,10 @@ def family_names(layout) -> list:
     change when rib stations or spar chord fractions move; it is the order of the
     ``thickness`` vector of ``MassComp`` / ``CalculixShellAnalysis`` fed by a ShellMeshGroup."""
     lay = load_layout(layout)
-    names = ["skin"] + [m.name for m in lay.members()]
+    names = [SKIN] + [m.name for m in lay.members()]
     for w in lay.wings:
         for k in range(len(w.rib_eta) - 1):
-            names += [f"{w.name}/upper_skin/bay_{k}", f"{w.name}/lower_skin/bay_{k}"]
+            names += [bay_name(w.name, side, k) for side in SIDES]
     return names
 
 

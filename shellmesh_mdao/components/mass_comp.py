@@ -20,6 +20,7 @@ import openmdao.api as om
 from ..analysis import ANALYSIS_MATERIAL, family_areas, n_families
 from ..errors import ShellMeshError
 from ..export import DEFAULT_THICKNESS
+from ..families import padded_names
 from ..mesh import ShellMesh
 
 __all__ = ["MassComp"]
@@ -53,8 +54,7 @@ class MassComp(om.ExplicitComponent):
     def setup(self):
         mesh = self.options["mesh"]
         if mesh is not None:
-            self.family_names = list(mesh.component_names) + [
-                f"component_{i}" for i in range(len(mesh.component_names), n_families(mesh))]
+            self.family_names = padded_names(mesh.component_names, n_families(mesh))
             self._areas = family_areas(mesh)
         else:
             self.family_names = discrete_family_names(self, "MassComp")
@@ -113,8 +113,7 @@ def mapped_family_values(comp, mesh: ShellMesh, values) -> np.ndarray:
     values = np.asarray(values, dtype=np.float64)
     out = np.zeros(len(names))
     counts = np.bincount(mesh.component, minlength=len(values)) if mesh.n_faces else np.zeros(len(values), int)
-    mesh_names = list(mesh.component_names) + [f"component_{i}" for i in range(len(mesh.component_names),
-                                                                              len(values))]
+    mesh_names = padded_names(mesh.component_names, len(values))
     for i, n in enumerate(mesh_names):
         if n in pos:
             out[pos[n]] += values[i]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 
+from ..families import padded_names, unnamed_name
 from ..mesh import ShellMesh
 
 __all__ = ["n_components", "sanitise_name", "inp_elset_names"]
@@ -36,6 +37,5 @@ def inp_elset_names(mesh: ShellMesh) -> list[str]:
     letter, at most 80 characters, unique ignoring case (CalculiX upper-cases names), never
     ``EALL``/``NALL``."""
     taken = {"EALL", "NALL"}
-    names = list(mesh.component_names) + [f"component_{i}" for i in
-                                          range(len(mesh.component_names), n_components(mesh))]
-    return [sanitise_name(n, 80, taken, f"component_{i}") for i, n in enumerate(names)]
+    names = padded_names(mesh.component_names, n_components(mesh))
+    return [sanitise_name(n, 80, taken, unnamed_name(i)) for i, n in enumerate(names)]

@@ -34,6 +34,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import MeshValidationError, ProjectionError
+from ..families import member_of
 from .kernels import chain_walk, closest_on_curves
 from ..mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows, unique_edges
 from .locator import SurfaceLocator, closest_point_on_triangles
@@ -673,7 +674,7 @@ def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
     by_name = {m.name: m for m in (infos or [])}
     planes, owner = {}, {}
     for i, nm in enumerate(mesh.component_names):
-        base = nm.split("/seg_")[0]
+        base = member_of(nm)
         inf = by_name.get(base)
         if inf is None:
             continue

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..families import bay_name, rib_name, spar_name
 from ..mesh import ShellMesh
 
 __all__ = ["skin_families"]
@@ -12,7 +13,8 @@ __all__ = ["skin_families"]
 def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
     """Name the skin patches the member chains cut out: ``<wing>/upper_skin/bay_<k>`` and
     ``<wing>/lower_skin/bay_<k>`` (bay k between rib k and rib k+1, between the first and
-    last spar; with fewer than two spars over the whole chord), everything else ``skin``.
+    last spar; with fewer than two spars over the whole chord; :func:`~shellmesh_mdao.families.bay_name`);
+    every other face keeps its component.
 
     A patch is a set of faces connected across edges that are not member chains. It is a bay
     when at least 99% of its face centroids lie inside the bay's box (between the two rib
@@ -39,8 +41,8 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
     members = {m.name: m for m in layout.members()}
     for w in layout.wings:
         up = layout.wing_up(w)
-        ribs = [members[f"{w.name}/rib_{k}"] for k in range(len(w.rib_eta))]
-        spars = [members[f"{w.name}/spar_{j}"] for j in range(len(w.spar_chord))]
+        ribs = [members[rib_name(w.name, k)] for k in range(len(w.rib_eta))]
+        spars = [members[spar_name(w.name, j)] for j in range(len(w.spar_chord))]
         cmid = 0.5 * (w.spar_chord[0] + w.spar_chord[-1]) if len(spars) >= 2 else 0.5
         for k in range(len(ribs) - 1):
             # the bay's own mid-chord point: follows dihedral and twist along the span
@@ -56,6 +58,6 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
             for side, mask in (("upper", box & upper), ("lower", box & ~upper)):
                 if mask.any():
                     comp[mask] = len(names)
-                    names.append(f"{w.name}/{side}_skin/bay_{k}")
+                    names.append(bay_name(w.name, side, k))
     return ShellMesh(mesh.points, mesh.faces, comp, names, mesh.fixed_vertices, mesh.feature_edges,
                      mesh.feature_edge_ids)

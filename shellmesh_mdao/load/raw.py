@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputFileError, MeshValidationError
+from ..families import SKIN
 
 __all__ = ["SURFACE_FORMATS", "MESH_FORMATS", "DEFAULT_NAME", "MAX_COORDINATE", "RawMesh", "check_path", "validate_raw"]
 
@@ -23,7 +24,7 @@ SURFACE_FORMATS = {
 MESH_FORMATS = (".vtu", ".msh", ".bdf", ".nas", ".inp")
 
 #: The component name of a surface whose file names none.
-DEFAULT_NAME = "skin"
+DEFAULT_NAME = SKIN
 #: Coordinates beyond this magnitude are refused (corrupt file; a 1 km aircraft in micrometres is 1e9).
 MAX_COORDINATE = 1e15
 

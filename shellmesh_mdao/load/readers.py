@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputFileError, ShellMeshError
+from ..families import physical_group_name, unnamed_name
 from ..mesh import ShellMesh
 from .cad import read_cad
 from .raw import DEFAULT_NAME, RawMesh
@@ -137,7 +138,7 @@ def _read_meshio(p: Path) -> RawMesh:
         k = int(comp.max()) + 1 if len(comp) else 0
         table = {int(v[0]): str(n) for n, v in fd.items() if v.size == 1 and np.issubdtype(v.dtype, np.integer)}
         k = max([k] + [i + 1 for i in table])
-        names = [table.get(i, f"component_{i}") for i in range(k)]
+        names = [table.get(i, unnamed_name(i)) for i in range(k)]
         if (comp < 0).any():
             raise InputFileError(f"{p.name}: negative 'component' cell data; re-export the file")
         lines = [i for i, cb in enumerate(m.cells) if cb.type == "line"]
@@ -155,7 +156,7 @@ def _read_meshio(p: Path) -> RawMesh:
             comp = tags - 1      # our own files: physical tag = component id + 1
         else:
             comp = np.searchsorted(all_tags, tags)
-        names = [named.get(int(t), f"physical_{int(t)}") for t in all_tags]
+        names = [named.get(int(t), physical_group_name(int(t))) for t in all_tags]
     else:
         comp = None
         names = None
@@ -215,7 +216,7 @@ def _read_pyvista(p: Path) -> RawMesh:
                 if v.size == 1 and np.issubdtype(v.dtype, np.integer):
                     table[int(v[0])] = str(n)
             k = max([int(c.max()) + 1 if len(c) else 0] + [i + 1 for i in table])
-            names = [table.get(i, f"component_{i}") for i in range(k)]
+            names = [table.get(i, unnamed_name(i)) for i in range(k)]
     return RawMesh(np.asarray(g.points, np.float64), faces[keep], comp, names, notes=notes,
                 fmt=p.suffix[1:].upper())
 
@@ -517,7 +518,7 @@ def _read_inp(p: Path) -> RawMesh:
     if family:
         from ..core.formats import inp_elset_names
         k = max(family) + 1
-        names = [family.get(i, f"component_{i}") for i in range(k)]
+        names = [family.get(i, unnamed_name(i)) for i in range(k)]
         fake = ShellMesh(np.zeros((0, 3)), np.zeros((0, 4)), component_names=names)
         key_to_id = {s.upper(): i for i, s in enumerate(inp_elset_names(fake))}
     comp = np.full(len(eid), -1, np.int64)

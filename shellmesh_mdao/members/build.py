@@ -7,6 +7,7 @@ import numpy as np
 
 from ..core.polygon import frame_from_normal, interior_samples, point_in_polygon, to2d
 from ..errors import ImprintError, LayoutError, SizeError
+from ..families import is_member, is_piece_of, segment_name
 from ..mesh import ShellMesh, norm_rows
 from .info import MemberInfo
 from .junctions import (MemberChains, chain_edge_len, classify_junctions, end_spacing, exact_junction_vertices,
@@ -315,7 +316,7 @@ def _check_junction_edges(mesh: ShellMesh, member_names) -> None:
     use."""
     topo = mesh.topology()
     names = set(member_names)
-    is_mem = np.array([nm.split("/seg_")[0] in names for nm in mesh.component_names], bool)
+    is_mem = np.array([is_member(nm, names) for nm in mesh.component_names], bool)
     fm = is_mem[mesh.component[topo.he_face]]
     ne = len(topo.edges)
     n_mem = np.bincount(topo.he_edge, weights=fm, minlength=ne).astype(np.int64)
@@ -347,7 +348,7 @@ def _piece_names(m: MemberChains, gtris, inner_lines, points, n_nodes, split: bo
     key = np.bincount(lab, weights=cen, minlength=npc) / np.bincount(lab, minlength=npc)
     rank = np.empty(npc, np.int64)
     rank[np.argsort(key, kind="stable")] = np.arange(npc)
-    return [f"{m.name}/seg_{r}" for r in range(npc)], rank[lab]
+    return [segment_name(m.name, r) for r in range(npc)], rank[lab]
 
 
 # ============================================================================ report
@@ -358,7 +359,7 @@ def member_statistics(mesh: ShellMesh, members_info) -> dict:
     cn = mesh.component_names
     out = {}
     for nm in names:                                   # loop over members
-        ids = [i for i, c in enumerate(cn) if c == nm or c.startswith(nm + "/seg_")]
+        ids = [i for i, c in enumerate(cn) if is_piece_of(c, nm)]
         sel = np.isin(mesh.component, ids)
         f = mesh.faces[sel]
         present = sorted({cn[i] for i in np.unique(mesh.component[sel])})
