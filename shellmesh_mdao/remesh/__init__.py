@@ -37,8 +37,7 @@ kernels they call are in :mod:`shellmesh_mdao.kernels`.
 """
 from __future__ import annotations
 
-from .driver import DEFAULT_DEVIATION_FRACTION, DEFAULT_MIN_EDGE_FRACTION, remesh_skin, remesh_statistics
+from .driver import DEFAULT_MIN_EDGE_FRACTION, remesh_skin, remesh_statistics
 from .improve import improve_triangles
 
-__all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION",
-           "DEFAULT_MIN_EDGE_FRACTION"]
+__all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_MIN_EDGE_FRACTION"]
