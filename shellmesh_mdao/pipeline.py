@@ -179,11 +179,10 @@ def stage_load(surface, size, options=None) -> PipelineState:
 def stage_layout(state: PipelineState, layout) -> PipelineState:
     """Read and validate the member layout (path, dict or :class:`~shellmesh_mdao.layout.Layout`)."""
     from .layout import load_layout
-    from .members import member_infos
 
     lay = load_layout(layout)
     lay.validate(state.size)
-    st = state.but(layout=lay, infos=member_infos(lay), stage="layout")
+    st = state.but(layout=lay, stage="layout")
     st.report["inputs"]["layout"] = lay.to_dict()
     return st
 
@@ -227,16 +226,19 @@ def stage_imprint(state: PipelineState) -> PipelineState:
 
 def stage_members(state: PipelineState) -> PipelineState:
     """Mesh every member (planar Delaunay or Coons patch) on its chains; split members at
-    their junctions; one conforming triangle mesh of skin and members."""
-    from .members import build_members, member_statistics
+    their junctions; one conforming triangle mesh of skin and members. Sets the state's
+    ``infos`` (:func:`~shellmesh_mdao.members.member_infos` of the layout), which the later
+    stages' node supports use."""
+    from .members import build_members, member_infos, member_statistics
 
     _need(state, "members")
+    infos = member_infos(state.layout)
     # members are flat or gently curved: meshed at the skin's flat-region edge length, graded
     # to the chain spacing at their boundary
-    mesh = build_members(state.mesh, state.chains, state.infos, REMESH_FACTOR * state.size)
-    st = state.but(mesh=mesh, stage="members")
+    mesh = build_members(state.mesh, state.chains, infos, REMESH_FACTOR * state.size)
+    st = state.but(mesh=mesh, infos=infos, stage="members")
     members = {k: dict(v) for k, v in st.report.get("members", {}).items()}
-    for name, s in member_statistics(mesh, state.infos).items():
+    for name, s in member_statistics(mesh, infos).items():
         members.setdefault(name, {"chains": []}).update(s)
     st.report["members"] = members
     return st
