@@ -328,6 +328,8 @@ def parse_config(data, base_dir=".", source=None) -> StudyConfig:
                 if not isinstance(v, bool):
                     raise _err(source, key, f"must be true or false, got {v!r}", "write true or false")
                 out_s[k] = v
+            elif isinstance(default, str):          # smooth_energy: its class checks the word
+                out_s[k] = str(v)
             elif isinstance(default, int):
                 out_s[k] = _number(v, key, source, lo=0, integer=True)
             else:
