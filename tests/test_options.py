@@ -17,7 +17,8 @@ from shellmesh_mdao.imprint import cut_chain, imprint_chains, imprint_mesh, refi
 from shellmesh_mdao.merge import merge_mesh, merge_triangles
 from shellmesh_mdao.options import (ImprintOptions, MergeOptions, PipelineOptions, QuadOptions, RemeshOptions,
                                     SmoothOptions, SplitOptions)
-from shellmesh_mdao.quad import finish_quads, finish_region, planarize, quad_mesh, settle_off_surface, subdivide_to_quads
+from shellmesh_mdao.quad import (finish_quads, finish_region, planarize, quad_mesh, settle_off_surface,
+                                 subdivide_to_quads)
 from shellmesh_mdao.remesh import remesh_skin
 from shellmesh_mdao.smooth import smooth, smooth_mesh
 from shellmesh_mdao.split import split_mesh, split_polygons

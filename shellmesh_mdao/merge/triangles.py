@@ -388,8 +388,8 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
         against the diagonal-cross-product normal (any value > 0 forbids non-convex and
         folded quads; a non-positive value still forbids them).
     valence_weight : ``lam`` of the valence term (beyond the paper; default the solver option
-        ``merge_valence_weight``; 0: off): the objective adds ``lam |valence - 4|`` for each vertex of ``valence_vertices``, its
-        valence counted in the merged mesh (its faces; the subdivision keeps it), since the
+        ``merge_valence_weight``; 0: off): the objective adds ``lam |valence - 4|`` for each
+        vertex of ``valence_vertices``, its valence counted in the merged mesh (its faces; the subdivision keeps it), since the
         subdivided quads around a vertex of valence 3, 5 or 6 cannot all be square. Solved as
         the LP relaxation of that MIP, whose 0/1 merges are kept, and an exact MIP over the
         edges it leaves fractional (a few hundred at most on the corpus); ``mip_gap`` of the

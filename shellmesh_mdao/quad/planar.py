@@ -94,8 +94,9 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float,
     turns over: the offsets of the nodes of such an element are halved (ten times, then
     dropped). The result is kept only if fewer quads are warped above ``warp_above`` than
     before. ``warp_above``: default the solver option ``warp_goal``
-    (:class:`~shellmesh_mdao.options.QuadOptions`), as the quad stage passes. ``vertices``: ids of the nodes that may move (default None: every node the rules
-    above allow); the others keep their positions. Same input, same offsets.
+    (:class:`~shellmesh_mdao.options.QuadOptions`), as the quad stage passes. ``vertices``: ids
+    of the nodes that may move (default None: every node the rules above allow); the others
+    keep their positions. Same input, same offsets.
 
     Returns ``(mesh, info)`` with ``info`` = ``{"applied", "nodes", "moved", "max_offset",
     "quads_above_before", "quads_above_after", "halvings", "warp_p99_before",
