@@ -389,13 +389,13 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
         folded quads; a non-positive value still forbids them).
     valence_weight : ``lam`` of the valence term (beyond the paper; default the solver option
         ``merge_valence_weight``; 0: off): the objective adds ``lam |valence - 4|`` for each
-        vertex of ``valence_vertices``, its valence counted in the merged mesh (its faces; the subdivision keeps it), since the
-        subdivided quads around a vertex of valence 3, 5 or 6 cannot all be square. Solved as
-        the LP relaxation of that MIP, whose 0/1 merges are kept, and an exact MIP over the
-        edges it leaves fractional (a few hundred at most on the corpus); ``mip_gap`` of the
-        result is measured against the LP's objective, a lower bound on every matching's, and
-        ``status`` is that MIP's (or the LP's when nothing was fractional). ``mip_gap`` the
-        option is not used on this path. An edge joins the candidates while its weight is
+        vertex of ``valence_vertices``, its valence counted in the merged mesh (its faces; the
+        subdivision keeps it), since the subdivided quads around a vertex of valence 3, 5 or 6
+        cannot all be square. Solved as the LP relaxation of that MIP, whose 0/1 merges are
+        kept, and an exact MIP over the edges it leaves fractional (a few hundred at most on
+        the corpus); ``mip_gap`` of the result is measured against the LP's objective, a lower
+        bound on every matching's, and ``status`` is that MIP's (or the LP's when nothing was
+        fractional). ``mip_gap`` the option is not used on this path. An edge joins the candidates while its weight is
         below ``2 lam`` (its merge can pay at both ends).
     valence_vertices : vertex ids counted by the valence term; default :func:`interior_vertices`
         (not on a boundary, non-manifold or feature edge, not fixed).

@@ -65,7 +65,8 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, options: QuadOpt
     (:class:`~shellmesh_mdao.options.SmoothOptions`); no step of either pass brings an element to
     or below :data:`FINAL_MIN_JACOBIAN`. Returns ``(mesh, supports, report)``, ``report`` the
     pipeline report's entries ``final_smooth`` (with ``final_iterations``), ``poor_repair``
-    (where elements were repaired), ``off_surface``, ``planarize`` and ``poor_elements``; the warnings are logged (logger ``shellmesh_mdao``)."""
+    (where elements were repaired), ``off_surface``, ``planarize`` and ``poor_elements``; the
+    warnings are logged (logger ``shellmesh_mdao``)."""
     o, so = options, smooth_options
     q, sup = subdivide_to_quads(mesh, supports, guard_jacobian=o.guard_jacobian)
     warp_term = None
