@@ -56,13 +56,12 @@ CONFIG_KEYS = {
 
 def solver_options() -> dict:
     """Known solver options: name -> default value (its type is the option's type). They are the
-    fields of :class:`shellmesh_mdao.pipeline.PipelineOptions`, passed to
+    fields of the stages' options classes (:mod:`shellmesh_mdao.options`, by their flat names:
+    :meth:`~shellmesh_mdao.options.PipelineOptions.to_dict`), passed to
     :func:`~shellmesh_mdao.pipeline.run_pipeline` as ``options``."""
-    import dataclasses
+    from .options import PipelineOptions
 
-    from .pipeline import PipelineOptions
-
-    return {f.name: getattr(PipelineOptions(), f.name) for f in dataclasses.fields(PipelineOptions)}
+    return PipelineOptions().to_dict()
 
 
 #: Human report extensions and their format.
@@ -327,6 +326,8 @@ def parse_config(data, base_dir=".", source=None) -> StudyConfig:
                 if not isinstance(v, bool):
                     raise _err(source, key, f"must be true or false, got {v!r}", "write true or false")
                 out_s[k] = v
+            elif isinstance(default, str):          # smooth_energy: its class checks the word
+                out_s[k] = str(v)
             elif isinstance(default, int):
                 out_s[k] = _number(v, key, source, lo=0, integer=True)
             else:

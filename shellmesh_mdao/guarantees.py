@@ -213,7 +213,7 @@ def check_guarantees(result, input_closed: bool = True, min_sj: float = 0.2, fre
     on_skin = np.flatnonzero(sup.kind == SURFACE)
     ds = d[on_skin]
     off, planar = result.report["off_surface"], result.report["planarize"]
-    bound = result.state.options.planar_offset * result.state.size
+    bound = result.state.options.quad.planar_offset * result.state.size
     moved = planar["moved"] if planar else 0
     if planar is not None and not planar["max_offset"] <= bound * (1 + 1e-12):
         _missed("planarize bound", f"planarize moved a node by {planar['max_offset']:.3g}, above planar_offset "

@@ -40,8 +40,9 @@ from .core.threads import Background
 from .core.topology import fixed_edge_mask
 from .errors import MeshValidationError, ProjectionError, SolverError
 from .mesh import ShellMesh, norm_rows, reduce_short
+from .options import SplitOptions
 
-__all__ = ["SplitOptions", "SplitResult", "SplitLP", "split_options", "polygon_energy", "split_energy",
+__all__ = ["SplitOptionTables", "SplitResult", "SplitLP", "split_options", "polygon_energy", "split_energy",
            "build_split_lp", "split_polygons", "split_mesh", "N_OPTIONS", "TRI", "QUAD"]
 
 N_OPTIONS = 11
@@ -108,7 +109,7 @@ _NAMES = {
 
 
 @dataclass(frozen=True)
-class SplitOptions:
+class SplitOptionTables:
     """The splitting option tables (paper Fig. 4 and 5, reconstructed).
 
     ``children``  (2, 11, 2, 4) local node ids of the (at most two) polygons an option
@@ -130,7 +131,7 @@ class SplitOptions:
     names: dict
 
 
-def split_options() -> SplitOptions:
+def split_options() -> SplitOptionTables:
     """Return the option tables: 11 quad options, 7 triangle options padded to 11.
 
     Quad (sides 0:(0,1), 1:(1,2), 2:(2,3), 3:(3,0)): option 0 joins the midpoints of
@@ -143,7 +144,7 @@ def split_options() -> SplitOptions:
     This numbering reproduces the paper's eq. 3 example exactly: triangle side (2,0)
     is split by options 2, 3, 5 and quad side (1,2) by options 0, 2, 6.
     """
-    return SplitOptions(_CH, _SPLITS, _VALID, _KEEP.copy(), _SIDE_OPTS, _NAMES)
+    return SplitOptionTables(_CH, _SPLITS, _VALID, _KEEP.copy(), _SIDE_OPTS, _NAMES)
 
 
 # --------------------------------------------------------------------------- energy
@@ -357,7 +358,7 @@ def build_split_lp(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_e
 
 
 def split_polygons(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_edges=None,
-                   split_fixed: bool = False, time_limit: float = 60.0, project=None,
+                   split_fixed: bool = False, time_limit: float = SplitOptions.split_time_limit, project=None,
                    form: str = "squared", integrality_tol: float = 1e-6) -> tuple[ShellMesh, SplitResult]:
     """Split triangles and quads where that lowers the eq.-2 energy (paper eq. 1-3).
 
@@ -371,7 +372,8 @@ def split_polygons(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_e
         their incident faces together (the agreement rows tie every face around an edge,
         so a member junction stays conforming); a split feature edge is replaced by its two
         halves with the same owner id and its midpoint becomes a fixed vertex.
-    time_limit : seconds for each HiGHS solve (LP, then MIP if the LP optimum is fractional).
+    time_limit : seconds for each HiGHS solve (LP, then MIP if the LP optimum is fractional);
+        default the solver option ``split_time_limit``.
     project : optional ``project(points (k,3), parent_edges (k,2)) -> (k,3)`` moving the new
         midpoints (e.g. back onto the input surface).
     form : energy form, see :func:`polygon_energy`.
@@ -446,12 +448,14 @@ def split_polygons(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, fixed_e
     return out, res
 
 
-def split_mesh(mesh: ShellMesh, locator, infos, *, time_limit: float) -> tuple[ShellMesh, Supports, dict]:
+def split_mesh(mesh: ShellMesh, locator, infos,
+               options: SplitOptions = SplitOptions()) -> tuple[ShellMesh, Supports, dict]:
     """The pipeline's split stage: :func:`split_polygons` on the whole mesh (chains, junctions
     and feature lines are never split), its new midpoints put onto the node supports
     (:func:`~shellmesh_mdao.core.supports.edge_midpoint_projector`), and the supports of the
     result (:func:`~shellmesh_mdao.core.supports.pipeline_supports`: input skin ``locator``,
-    member planes of ``infos``, feature curves). ``time_limit``: HiGHS's, per solve.
+    member planes of ``infos``, feature curves). ``options``: the stage's
+    :class:`~shellmesh_mdao.options.SplitOptions` (``split_time_limit``: HiGHS's, per solve).
 
     Returns ``(mesh, supports, report)``, ``report`` the pipeline report's ``split`` entry."""
     before = mesh
@@ -464,7 +468,7 @@ def split_mesh(mesh: ShellMesh, locator, infos, *, time_limit: float) -> tuple[S
     # GIL): the same values as made before it (the target case's split stage 0.154 -> 0.139 s,
     # docs/benchmarks.md, fifteenth pass)
     made = Background(supports_and_projector)
-    mesh, res = split_polygons(before, time_limit=time_limit,
+    mesh, res = split_polygons(before, time_limit=options.split_time_limit,
                                project=lambda points, parent_edges: made.result()[1](points, parent_edges))
     sup = made.result()[0]
     # where no edge was split (the target case) the mesh is the same and so are its supports

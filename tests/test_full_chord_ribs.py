@@ -59,7 +59,7 @@ def test_full_chord_root_rib_projects(geometry_dir, manifest):
     specs = [s for s in chain_specs(lay, pr) if s.member == "right_wing/rib_0"]
     assert [s.side for s in specs] == ["loop"]
     P, T = st.surface.points, st.surface.faces[:, :3]
-    _, res = imprint_chains(st.surface, P, T, specs, locator=loc)
+    _, res = imprint_chains(st.surface, P, T, specs, snap=0.25, locator=loc)
     assert res[0].arc.closed and len(res[0].vertices) >= 10
 
 

@@ -88,7 +88,7 @@ def test_accepts_the_pipeline_mesh_and_returns_its_figures(good):
     # planarize moved skin nodes off the input on purpose, by at most planar_offset * size
     moved = good.report["planarize"]["moved"]
     assert 0 < f["skin_nodes_off"] <= moved and f["planarize_moved"] == moved
-    assert f["max_skin_distance"] <= good.state.options.planar_offset * SIZE * (1 + 1e-9)
+    assert f["max_skin_distance"] <= good.state.options.quad.planar_offset * SIZE * (1 + 1e-9)
     assert 0 < f["skin_on_surface_share"] < 1 and 0 < f["fixed_share"] < 0.05
     assert issubclass(MeshValidationError, ShellMeshError) and len(set(GUARANTEES)) == 17
 
@@ -210,7 +210,7 @@ def test_rejects_nodes_off_their_supports(good, on_surface):
 
 
 def test_rejects_planarize_beyond_its_bound_and_too_many_fixed_nodes(good):
-    bound = good.state.options.planar_offset * good.state.size
+    bound = good.state.options.quad.planar_offset * good.state.size
     planar = {"moved": 0, "max_offset": 2 * bound, "quads_above_before": 3, "quads_above_after": 1}
     missed(edited(good, planarize=planar), "planarize bound")
     assert "nodes fixed" in missed(good, "few fixed nodes", max_fixed=1e-6)

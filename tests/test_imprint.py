@@ -50,7 +50,7 @@ def imprinted():
     m = naca_wing(n_chord=30, n_span=25)
     lay = naca_wing_layout()["wings"][0]
     chains = wing_chains(m, lay, np.linspace(0, 1, 8), [0.15, 0.65])
-    out, res = imprint_chains(m, m.points, m.faces[:, :3], chains)
+    out, res = imprint_chains(m, m.points, m.faces[:, :3], chains, snap=0.25)
     return m, chains, out, res
 
 
@@ -104,7 +104,7 @@ def test_chains_are_mesh_edges_and_share_crossings(imprinted):
 
 def test_imprint_deterministic(imprinted):
     m, chains, out, res = imprinted
-    out2, _ = imprint_chains(m, m.points, m.faces[:, :3], chains)
+    out2, _ = imprint_chains(m, m.points, m.faces[:, :3], chains, snap=0.25)
     assert np.array_equal(out.points, out2.points) and np.array_equal(out.faces, out2.faces)
     assert np.array_equal(out.feature_edges, out2.feature_edges)
 
@@ -352,7 +352,7 @@ def test_refine_chains_bounds_the_chord_deviation(imprinted):
     before = worst(out, res)
     tol = 0.25 * float(np.median(before[before > 0]))
     assert (before > tol).sum() >= 4, "the fixture must have chains to refine"
-    ref = refine_chains(out, res2, tol)
+    ref = refine_chains(out, res2, tol, depth_fraction=0.0)
     after = worst(ref, res2)
     assert after.max() <= tol * (1 + 1e-9), after.max()
     assert sum(len(r.vertices) for r in res2) > sum(len(r.vertices) for r in res)
@@ -418,7 +418,7 @@ def test_refine_chains_bounds_the_deviation_by_the_member_depth(imprinted):
     assert (after <= f * depth * (1 + 1e-9)).all(), (after / depth).max()
     assert ref.check().ok and ref.is_closed()
     res3 = copy.deepcopy(res)                            # off (0): nothing to split without a length bound
-    assert refine_chains(out, res3, np.inf).n_points == out.n_points
+    assert refine_chains(out, res3, np.inf, depth_fraction=0.0).n_points == out.n_points
 
 
 def test_chain_deviation_option_refines_the_pipeline_chains():
@@ -427,9 +427,9 @@ def test_chain_deviation_option_refines_the_pipeline_chains():
     sections."""
     from shellmesh_mdao.pipeline import REMESH_FACTOR, PipelineOptions, run_pipeline
 
-    assert PipelineOptions().chain_deviation == 0.01
-    assert PipelineOptions().chain_depth_deviation == 0.0075
-    assert PipelineOptions.from_dict({"chain_deviation": 0.01}).chain_deviation == 0.01
+    assert PipelineOptions().imprint.chain_deviation == 0.01
+    assert PipelineOptions().imprint.chain_depth_deviation == 0.0075
+    assert PipelineOptions.from_dict({"chain_deviation": 0.01}).imprint.chain_deviation == 0.01
     for name in ("chain_deviation", "chain_depth_deviation"):
         with pytest.raises(Exception, match=name):
             PipelineOptions.from_dict({name: -1})

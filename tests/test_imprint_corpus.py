@@ -207,7 +207,7 @@ def _roof_imprint():
     plane = Plane.make([x0, 0.5, 0.15], [1.0, 0.05, 0.0])
     bounds = (Plane.make([0, 0.15, 0], [0, 1.0, 0]), Plane.make([0, 0.85, 0], [0, -1.0, 0]))
     spec = ChainSpec("rib", "upper", plane, bounds, np.array([x0, 0.5, 0.15]), -1)
-    mesh, chains = imprint_chains(skin, P, T, [spec])
+    mesh, chains = imprint_chains(skin, P, T, [spec], snap=0.25)
     return skin, plane, mesh, chains
 
 
@@ -257,7 +257,7 @@ def test_improve_skin_rounds_work_near_the_chains_and_the_poor_triangles_only():
     plane = Plane.make([0.5, 0.5, 0.15], [1.0, 0.05, 0.0])
     bounds = (Plane.make([0, 0.15, 0], [0, 1.0, 0]), Plane.make([0, 0.85, 0], [0, -1.0, 0]))
     spec = ChainSpec("rib", "upper", plane, bounds, np.array([0.5, 0.5, 0.15]), -1)
-    mesh, chains = imprint_chains(skin, skin.points, skin.faces[:, :3], [spec])
+    mesh, chains = imprint_chains(skin, skin.points, skin.faces[:, :3], [spec], snap=0.25)
     loc = SurfaceLocator(skin.points, skin.faces[:, :3])
     T = mesh.faces[:, :3]
     ang = tri_angles_min(mesh.points, T)

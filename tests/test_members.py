@@ -420,7 +420,7 @@ def test_triangulate_planar_strip_is_one_row_of_quad_pairs():
         assert set(on_bottom.tolist()) <= {1, 2}               # one edge on a chain, apex on the other
         assert tri_min_angles(uv_all, tris).min() >= STRIP_MIN_ANGLE
         m = ShellMesh(np.c_[uv_all, np.zeros(len(uv_all))], tris)
-        q, res = merge_triangles(m, merge_bonus=1.0)
+        q, res = merge_triangles(m, merge_bonus=1.0, valence_weight=0.0)
         # at most one unmerged triangle per unit of chain-count mismatch, the rest quads
         assert q.n_tris <= abs(2 * nb - len(uv)) + 2
         quads = q.faces[q.faces[:, 3] >= 0]

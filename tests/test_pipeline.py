@@ -9,8 +9,6 @@ bit on a second run. The stage functions run one by one give the same mesh as ru
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -103,7 +101,7 @@ def test_final_pass_refreshes_every_final_refresh_steps(monkeypatch):
     import shellmesh_mdao.quad.finish as F
 
     o = pl.PipelineOptions()
-    assert (o.final_iterations, o.final_refresh) == (4, 2)
+    assert (o.quad.final_iterations, o.quad.final_refresh) == (4, 2)
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="smooth").state
     seen = []
     real = F.smooth
@@ -116,7 +114,7 @@ def test_final_pass_refreshes_every_final_refresh_steps(monkeypatch):
 
     monkeypatch.setattr(F, "smooth", recording)
     pl.run_stage(st, "quad")
-    pl.run_stage(st.but(options=dataclasses.replace(o, final_refresh=1)), "quad")
+    pl.run_stage(st.but(options=o.replace(final_refresh=1)), "quad")
     assert seen[0][0] == 2 and seen[1][0] == 1
     assert seen[0][1] == seen[1][1] == 4 and (seen[0][2], seen[1][2]) == (2, 4)
 
@@ -136,7 +134,7 @@ def test_snap_option_keeps_the_edges_beside_chains_long():
     within snap x its shortest incident edge of it, so a larger snap cuts fewer short edges beside the
     chains (on this wing at 0.4 against 0.25: 5th percentile 0.55 against 0.52 of the remesh edge, 683
     against 719 nodes); values of 0.5 and more are refused."""
-    assert pl.PipelineOptions().snap == 0.4
+    assert pl.PipelineOptions().imprint.snap == 0.4
     with pytest.raises(ShellMeshError, match="'snap' must be below 0.5"):
         pl.PipelineOptions.from_dict({"snap": 0.5})
     runs = [pl.run_pipeline(small_wing(), small_layout(), SIZE, until="imprint", progress=False, options=o)
@@ -152,7 +150,7 @@ def test_final_ortho_weight_option_lifts_the_quads():
     smoothed mesh is higher (on this wing, with the warp moves after the smoothing off so that the
     smoothing alone is compared: 0.9463 against 0.9442; its worst element is not better, 0.317
     against 0.336)."""
-    assert pl.PipelineOptions().final_ortho_weight == 3.0
+    assert pl.PipelineOptions().quad.final_ortho_weight == 3.0
     only = {"planar_offset": 0.0, "final_warp_weight": 0.0}
     base = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, options=only).mesh
     one = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False,
@@ -174,9 +172,9 @@ def test_warp_options_flatten_the_quads():
     mesh exactly as without the term; smooth_warp_weight puts the term in the smoothing before
     subdivision (pre-subdivision warp p99 10.6 -> 8.0 deg at 300; 13.9 -> 7.3 before the merge's
     valence term, whose quads are flatter to begin with)."""
-    o = pl.PipelineOptions()
-    assert (o.smooth_warp_weight, o.final_warp_weight, o.smooth_warp_spread, o.warp_from, o.warp_goal) == (
-        300.0, 300.0, 75.0, 7.0, 10.0)
+    o = pl.PipelineOptions().to_dict()
+    names = ("smooth_warp_weight", "final_warp_weight", "smooth_warp_spread", "warp_from", "warp_goal")
+    assert tuple(o[k] for k in names) == (300.0, 300.0, 75.0, 7.0, 10.0)
     res = run_flat_off()                     # planarize (after the pass) off: the pass alone
     wt = res.report["final_smooth"]["warp_term"]
     p99 = np.percentile(element_quality(res.mesh.points, res.mesh.faces)["warp"], 99)
@@ -196,7 +194,7 @@ def test_warp_options_flatten_the_quads():
     assert 0 < moved.sum() <= wt["vertices"] < 0.8 * res.mesh.n_points
     w = element_quality(off.mesh.points, off.mesh.faces)["warp"]
     near = np.zeros(res.mesh.n_points, bool)
-    near[off.mesh.faces[w > o.warp_from]] = True
+    near[off.mesh.faces[w > o["warp_from"]]] = True
     for _ in range(2):                                                  # two rings of faces
         near[off.mesh.faces[near[off.mesh.faces].any(1)]] = True
     assert near[moved].all()
@@ -233,7 +231,7 @@ def test_planarize_moves_free_skin_nodes_off_the_input_within_the_bound():
     nodes moved (chain, junction, feature and member nodes where they were), each by at most the
     bound; fewer quads above 10 degrees, as reported; the off-surface report (measured before)
     the same."""
-    assert pl.PipelineOptions().planar_offset == 0.05
+    assert pl.PipelineOptions().quad.planar_offset == 0.05
     res, flat = run_small((0.15, 0.65)), run_pass_one_only()
     assert not res.report["final_smooth"]["warp_term"]["applied"]
     q, q0, sup = res.mesh, flat.mesh, res.state.supports
@@ -303,7 +301,7 @@ def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
     expect = np.unique(q.faces[ring][q.faces[ring] >= 0])
     assert np.array_equal(np.sort(passes[0][1]), expect) and wt["vertices"] == len(expect)
     # fewer than the old rule (every quad above warp_from in the first pass's mesh) would move
-    assert (element_quality(q.points, q.faces)["warp"] > res.state.options.warp_from).sum() > seeds.sum()
+    assert (element_quality(q.points, q.faces)["warp"] > res.state.options.smooth.warp_from).sum() > seeds.sum()
     # the pass's start: the trial's mesh, the region's nodes at their positions before its move
     inside = np.zeros(q.n_points, bool)
     inside[expect] = True
@@ -383,9 +381,8 @@ def test_warp_pass_runs_only_where_planarize_alone_misses_the_goal(monkeypatch):
     st = res.state
     q, sup = st.mesh, st.supports
     keep = (q.points.copy(), sup.kind.copy(), sup.ref.copy())
-    o = st.options
-    opts = dict(guard_jacobian=o.guard_jacobian, planar_offset=o.planar_offset, warp_goal=o.warp_goal)
-    a, b = F.finish_quads(q, sup, st.size, **opts), F.finish_quads(q, sup, st.size, **opts)
+    o = st.options.quad
+    a, b = F.finish_quads(q, sup, st.size, options=o), F.finish_quads(q, sup, st.size, options=o)
     assert a["mesh"].points.tobytes() == b["mesh"].points.tobytes() and a["planar"] == b["planar"]
     assert np.array_equal(q.points, keep[0]) and np.array_equal(sup.kind, keep[1]) and np.array_equal(sup.ref, keep[2])
 
@@ -417,7 +414,7 @@ def test_split_supports_are_made_beside_its_lp(monkeypatch, remesh):
 
     st = pl.run_pipeline(small_wing(), small_layout(), SIZE, progress=False, until="members", remesh=remesh).state
     sup0 = pipeline_supports(st.mesh, st.locator, st.infos)
-    eager, _ = S.split_polygons(st.mesh, time_limit=st.options.split_time_limit,
+    eager, _ = S.split_polygons(st.mesh, time_limit=st.options.split.split_time_limit,
                                 project=edge_midpoint_projector(st.mesh, sup0))
     threads = []
     real = S.pipeline_supports

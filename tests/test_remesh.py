@@ -7,7 +7,12 @@ from shellmesh_mdao.errors import MeshValidationError, SizeError
 from shellmesh_mdao.load import load_surface
 from shellmesh_mdao.mesh import ShellMesh
 from shellmesh_mdao.core.locator import SurfaceLocator
-from shellmesh_mdao.remesh import DEFAULT_DEVIATION_FRACTION, improve_triangles, remesh_skin, remesh_statistics
+from shellmesh_mdao.options import RemeshOptions
+from shellmesh_mdao.remesh import improve_triangles, remesh_skin, remesh_statistics
+
+#: the deviation passes for any deviating edge, as these tests were written for (remesh_skin's
+#: default before it became the remesh stage's remesh_pass_fraction)
+EVERY_PASS = RemeshOptions(remesh_pass_fraction=0.0)
 
 # final quad size H per corpus geometry (the remesher works at 2 H) and a floor under the
 # smallest triangle angle of the result (docs/remesh.md). That angle is one triangle's and
@@ -52,7 +57,7 @@ def corpus(geometry_dir, manifest):
             skin, _ = load_surface(geometry_dir / manifest["geometries"][name]["file"])
             target = 2 * SIZES[name]
             rep = {}
-            out = remesh_skin(skin, target, report=rep)
+            out = remesh_skin(skin, target, EVERY_PASS, report=rep)
             cache[name] = (skin, out, rep, target)
         return cache[name]
     return get
@@ -105,7 +110,7 @@ def test_corpus_remesh_is_valid_and_on_size(corpus, name):
     if name != "straight_wing":
         assert best.min() > 0
     # deviation measured and reported; within max_deviation except at sub-min_edge details
-    delta = DEFAULT_DEVIATION_FRACTION * target
+    delta = RemeshOptions.remesh_deviation * target
     assert rep["max_deviation"] == pytest.approx(delta)
     assert rep["deviation_edge_midpoints"] <= MAX_DEV[name] * delta
     # feature lines are chains of mesh edges, their ends fixed
@@ -150,7 +155,7 @@ def test_upper_and_lower_skins_not_stitched(corpus):
         E = out.edges()
         opposite = np.einsum("ij,ij->i", nin[tri[E[:, 0]]], nin[tri[E[:, 1]]]) < -0.5
         _, _, dmid = loc.closest(0.5 * (out.points[E[:, 0]] + out.points[E[:, 1]]))
-        stitched = opposite & (dmid > DEFAULT_DEVIATION_FRACTION * target)
+        stitched = opposite & (dmid > RemeshOptions.remesh_deviation * target)
         assert stitched.sum() <= allowed
         if stitched.any():
             span = np.abs(out.points[:, 1]).max()
@@ -212,7 +217,7 @@ def test_edge_across_the_cessna_dorsal_fin_is_split(geometry_dir, manifest):
                          progress=False, until="project").state
     target = 2.0 * 0.394485
     rep = {}
-    remesh_skin(st.surface, target, max_deviation=0.1 * target, locator=st.locator, report=rep)
+    remesh_skin(st.surface, target, EVERY_PASS, locator=st.locator, report=rep)      # max_deviation 0.1 target
     assert rep["n_standing_faces"] == 0
     # 1.01-1.44 x max_deviation on the input and six copies perturbed by 1e-10 (the edges
     # left over it are the guarantee's exceptions: short, or splitting them would make a
@@ -231,7 +236,7 @@ def test_deviation_split_does_not_land_on_the_vertex_across(geometry_dir, manife
     P = skin.points * (1 + 1e-10 * np.random.default_rng(0).standard_normal(skin.points.shape))
     skin = ShellMesh(P, skin.faces, skin.component, list(skin.component_names))
     rep = {}
-    out = remesh_skin(skin, 0.08, report=rep)
+    out = remesh_skin(skin, 0.08, EVERY_PASS, report=rep)
     assert out.edge_lengths().min() > 0.05 * rep["min_edge"]
     assert _angles(out.points, out.faces[:, :3]).min() > 1.0
     assert out.check().ok, out.check().problems()
@@ -239,8 +244,8 @@ def test_deviation_split_does_not_land_on_the_vertex_across(geometry_dir, manife
 
 def test_remesh_is_deterministic(geometry_dir, manifest):
     skin, _ = load_surface(geometry_dir / manifest["geometries"]["straight_wing"]["file"])
-    a = remesh_skin(skin, 0.08)
-    b = remesh_skin(skin, 0.08)
+    a = remesh_skin(skin, 0.08, EVERY_PASS)
+    b = remesh_skin(skin, 0.08, EVERY_PASS)
     assert np.array_equal(a.points, b.points)
     assert np.array_equal(a.faces, b.faces)
     assert np.array_equal(a.feature_edges, b.feature_edges)
@@ -250,17 +255,17 @@ def test_remesh_is_deterministic(geometry_dir, manifest):
 
 def test_deviation_passes_run_only_above_their_fraction(geometry_dir, manifest):
     # cessna210 at 0.5: 104 of about 15,800 edges (0.7 %) deviate more than max_deviation after
-    # the sweeps. With deviation_pass_fraction 0.01 no pass runs (the same mesh as without
+    # the sweeps. With remesh_pass_fraction 0.01 no pass runs (the same mesh as without
     # passes, bit for bit), with 0.005 they do (another mesh). The deviation splits keep the
     # bound either way, but for the edges they may not split (a new angle below 20 degrees):
     # 9 of them without the passes, up to 1.34 max_deviation; none with them
     skin, _ = load_surface(geometry_dir / manifest["geometries"]["cessna210"]["file"])
     target = 0.5
-    delta = DEFAULT_DEVIATION_FRACTION * target
+    delta = RemeshOptions.remesh_deviation * target
     r0, r1, r2 = {}, {}, {}
-    none = remesh_skin(skin, target, deviation_passes=0, report=r0)
-    above = remesh_skin(skin, target, deviation_pass_fraction=0.01, report=r1)
-    ran = remesh_skin(skin, target, deviation_pass_fraction=0.005, report=r2)
+    none = remesh_skin(skin, target, EVERY_PASS, deviation_passes=0, report=r0)
+    above = remesh_skin(skin, target, RemeshOptions(remesh_pass_fraction=0.01), report=r1)
+    ran = remesh_skin(skin, target, RemeshOptions(remesh_pass_fraction=0.005), report=r2)
     assert np.array_equal(none.points, above.points) and np.array_equal(none.faces, above.faces)
     assert ran.n_faces != none.n_faces or not np.array_equal(ran.points, none.points)
     assert r2["deviation_edge_midpoints"] <= MAX_DEV["cessna210"] * delta
@@ -273,7 +278,7 @@ def test_input_resolution_does_not_set_output_resolution(corpus):
     v, f = trimesh.remesh.subdivide(skin.points, skin.faces[:, :3])
     fine = ShellMesh(v, f)
     assert fine.n_faces == 4 * skin.n_faces
-    out2 = remesh_skin(fine, target)
+    out2 = remesh_skin(fine, target, EVERY_PASS)
     assert abs(out2.n_faces - out.n_faces) <= 0.15 * out.n_faces
     assert np.median(out2.edge_lengths()) == pytest.approx(np.median(out.edge_lengths()), rel=0.1)
 
@@ -282,7 +287,7 @@ def test_components_follow_the_input(corpus):
     skin, _, _, target = corpus("straight_wing")
     comp = (skin.face_centroids()[:, 1] > 0).astype(np.int32)
     two = ShellMesh(skin.points, skin.faces, comp, ["left", "right"])
-    out = remesh_skin(two, target)
+    out = remesh_skin(two, target, EVERY_PASS)
     assert out.component_names[:2] == ["left", "right"]
     c = out.face_centroids()
     # the border y = 0 is kept as a feature line, so every face is on one side

@@ -15,7 +15,22 @@ from shellmesh_mdao.quad import subdivide_to_quads
 from shellmesh_mdao.quality import scaled_jacobian
 from shellmesh_mdao.core.supports import (CURVE, FIXED, PLANE, SURFACE, Curve, CurveSet, Supports, derive_supports,
                                           polylines_from_edges)
-from shellmesh_mdao.smooth import CG_RTOL, smooth
+from shellmesh_mdao.smooth import CG_RTOL
+from shellmesh_mdao.smooth import smooth as smooth_qp
+
+#: the smooth() settings these tests were written for (its defaults before they became the smooth
+#: stage's, :class:`~shellmesh_mdao.options.SmoothOptions`): 20 steps, the length energy, no
+#: planarity term (and every quad in it when on), the fold guard at 0.3
+PLAIN = dict(iterations=20, energy="length", warp_weight=0.0, warp_spread=180.0, min_jacobian=0.3)
+
+#: merge_triangles() without its bonus and valence term (its defaults before they became the merge
+#: stage's)
+PLAIN_MERGE = dict(merge_bonus=0.0, valence_weight=0.0)
+
+
+def smooth(mesh, supports, **kw):
+    """:func:`~shellmesh_mdao.smooth.smooth` with :data:`PLAIN` where ``kw`` does not say."""
+    return smooth_qp(mesh, supports, **{**PLAIN, **kw})
 
 
 def grid(nx, ny, x0=0.0, y0=0.0, sx=1.0, sy=1.0):
@@ -390,7 +405,7 @@ def _corpus_quads(geometry_dir, name, feature_deg=30.0):
     mesh = ShellMesh(tm.vertices, tm.faces, feature_edges=fe)
     loc = SurfaceLocator(tm.vertices, tm.faces)
     curves = {-1: [(mesh.points[ix], cl) for ix, cl in polylines_from_edges(mesh.points, fe)]}
-    merged, _ = merge_triangles(mesh)
+    merged, _ = merge_triangles(mesh, **PLAIN_MERGE)
     sup = derive_supports(merged, loc, curves=curves)
     q, qs = subdivide_to_quads(merged, sup)
     return q, qs, loc
@@ -449,7 +464,7 @@ def test_thin_trailing_edge_never_jumps_to_the_opposite_skin():
     fe = topo.edges[(fn[f[:, 0]] * fn[f[:, 1]]).sum(1) < np.cos(np.radians(30))]
     mesh = ShellMesh(wing.points, wing.faces, feature_edges=fe)
     curves = {-1: [(mesh.points[ix], cl) for ix, cl in polylines_from_edges(mesh.points, fe)]}
-    merged, _ = merge_triangles(mesh)
+    merged, _ = merge_triangles(mesh, **PLAIN_MERGE)
     sup = derive_supports(merged, loc, curves=curves)
     q, qs = subdivide_to_quads(merged, sup)
     out, res = smooth(q, qs, iterations=10)

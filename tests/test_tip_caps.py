@@ -33,7 +33,7 @@ def test_straight_wing_seed58_tip_caps_on_surface(geometry_dir, manifest):
     # moved along their normal (at most planar_offset * size; the nodes this test was written for
     # were 0.31 sizes inside the wing)
     moved = res.report["planarize"]["moved"] if res.report["planarize"] else 0
-    bound = res.state.options.planar_offset * case["size"]
+    bound = res.state.options.quad.planar_offset * case["size"]
     tol = 1e-9 * q.diagonal
     assert int((d > tol).sum()) <= moved and d.max() <= bound + tol, \
         f"{int((d > tol).sum())} skin nodes off (max {d.max():.3g}), {moved} moved by planarize"

@@ -33,6 +33,7 @@ Modules (each imports only the public names of the others; nothing here imports 
 * :mod:`.repair`    local repair of the few triangles left below the angle bound (:class:`SkinPatch`);
 * :mod:`.bridges`   skin edges between two vertices of one member's chains (:func:`split_member_bridges`);
 * :mod:`.families`  the bay families of the skin (:func:`skin_families`);
+* :mod:`.stage`     the stage's cut and chain finishing in order (:func:`imprint_mesh`);
 * :mod:`.common`    small helpers the modules share (triangle angles, index ranges, edge keys).
 """
 from __future__ import annotations
@@ -46,8 +47,9 @@ from .improve import improve_skin
 from .refine import chain_depths, coarsen_chains, refine_chains
 from ..core.section import Plane, PlaneSection, SectionArc, plane_section, section_arc
 from .specs import ChainSpec, chain_specs
+from .stage import imprint_mesh
 
 __all__ = ["ChainSpec", "ChainResult", "SNAP_FALLBACK", "chain_specs", "imprint_chains", "insert_point", "cut_chain",
            "closest_on_polyline", "kept_sharp_segments", "chain_depths", "refine_chains", "coarsen_chains",
-           "improve_skin", "split_member_bridges", "skin_families", "chain_report",
+           "improve_skin", "split_member_bridges", "skin_families", "chain_report", "imprint_mesh",
            "Plane", "PlaneSection", "SectionArc", "plane_section", "section_arc"]

@@ -13,6 +13,7 @@ from ..errors import ImprintError
 from ..core.kernels import chain_walk
 from .kernels import centroid_d2
 from ..mesh import ShellMesh, bbox_diagonal, cross_rows, norm_rows, reduce_short, unique_edges
+from ..options import ImprintOptions
 from .common import tri_angles_min
 from .crossings import arc_crossings, arc_feature_crossings
 from ..core.section import SectionArc, plane_section, section_arc
@@ -168,14 +169,15 @@ def _point_tri(p, a, b, c):
 
 
 def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, arc: SectionArc,
-              movable: np.ndarray, on_plane: np.ndarray, snap: float = 0.25, name: str | None = None,
-              end_vertices=None):
+              movable: np.ndarray, on_plane: np.ndarray, snap: float = ImprintOptions.snap,
+              name: str | None = None, end_vertices=None):
     """Cut the skin triangulation (P, T) along ``spec.plane`` inside ``spec.bounds``, on the
     piece through ``spec.seed``; move the chain vertices onto the exact input ``arc``.
 
-    ``movable`` (n,) marks vertices that may be snapped; ``on_plane`` (n,) marks vertices
-    that must be treated as lying exactly on this plane (crossing vertices inserted
-    beforehand); ``end_vertices`` the two of them where an open chain ends. Returns
+    ``movable`` (n,) marks vertices that may be snapped (those within ``snap`` times their
+    shortest incident edge of the plane; default the solver option ``snap``); ``on_plane``
+    (n,) marks vertices that must be treated as lying exactly on this plane (crossing
+    vertices inserted beforehand); ``end_vertices`` the two of them where an open chain ends. Returns
     ``(P, T, comp, chain_vertices_in_order, (split_edges, new_nodes))``:
     the last pair lists the old edges that received a new node, so the caller can split
     feature edges lying on them.
@@ -467,12 +469,13 @@ def split_hanging(P, T, C, uedges, new_id):
 
 
 def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np.ndarray, chains,
-                   snap: float = 0.25, tol: float = 1e-9, locator=None, snap_fallback: float = SNAP_FALLBACK):
+                   snap: float = ImprintOptions.snap, tol: float = 1e-9, locator=None,
+                   snap_fallback: float = SNAP_FALLBACK):
     """Imprint every chain of ``chains`` (list of :class:`ChainSpec`) into the triangle
     ``skin`` (vertices on the input surface given by ``surface_points``/``surface_tris``).
 
-    ``snap``: snap distance of the cut (:func:`cut_chain`; the pipeline passes its solver option
-    ``snap``, 0.4 by default). A cut at a snap distance above
+    ``snap``: snap distance of the cut (:func:`cut_chain`; default the solver option ``snap``,
+    :class:`~shellmesh_mdao.options.ImprintOptions`). A cut at a snap distance above
     ``snap_fallback`` that does not keep the chain's crossing points (an open chain not
     ending at its two crossing vertices, a crossing vertex on its arc left out of it, or a
     branching chain) is redone at ``snap_fallback``: a larger snap can reach skin vertices

@@ -8,6 +8,7 @@ import numpy as np
 from ..core.polyline import closest_on_polyline
 from ..core.kernels import greedy_independent
 from ..mesh import ShellMesh, norm_rows, unique_edges, vertex_faces
+from ..options import ImprintOptions
 from .common import edge_keys, has_edge, min_angles_small, polyline_param, ranges, unit_normals
 from .cut import split_feature_edges, split_hanging
 from .improve import flip_round, improve_skin
@@ -38,7 +39,7 @@ def chain_depths(chains) -> np.ndarray:
 
 
 def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4,
-                  depth_fraction: float = 0.0) -> ShellMesh:
+                  depth_fraction: float = ImprintOptions.chain_depth_deviation) -> ShellMesh:
     """Split chain edges whose exact arc bulges more than ``max_deviation`` from the chord, at
     the arc point farthest from it (on the input surface and the member plane); both skin
     triangles on the edge are split, and a feature edge on it becomes two. Up to ``rounds``
@@ -56,9 +57,10 @@ def refine_chains(mesh: ShellMesh, chains, max_deviation: float, rounds: int = 4
 
     A chain whose vertices are snapped skin vertices has chords as long as the skin's edges;
     on a curved section they cut off area (bwb's thin outer wing: a rib 1.05 % smaller than
-    its exact section). The pipeline runs this when the solver option ``chain_deviation`` is
-    above 0 (a fraction of the remesh edge length; default 0.01), with ``depth_fraction``
-    the option ``chain_depth_deviation`` (default 0.0075)."""
+    its exact section). The imprint stage (:func:`~shellmesh_mdao.imprint.imprint_mesh`) runs
+    this when the solver option ``chain_deviation`` is above 0 (a fraction of the remesh edge
+    length), with ``depth_fraction`` the option ``chain_depth_deviation`` (its default, 0 turns
+    the depth bound off; :class:`~shellmesh_mdao.options.ImprintOptions`)."""
     P, T, C = mesh.points.copy(), mesh.faces[:, :3].copy(), mesh.component.copy()
     fe = np.sort(np.asarray(mesh.feature_edges, np.int64).reshape(-1, 2), axis=1)
     fid = np.asarray(mesh.feature_edge_ids).copy()

@@ -42,6 +42,7 @@ from ..core.topology import fixed_edge_mask
 from ..errors import MeshValidationError
 from .kernels import safe_matching_rounds
 from ..mesh import ShellMesh, norm_rows
+from ..options import MergeOptions
 from ..split import polygon_energy
 
 __all__ = ["MergeResult", "interior_vertices", "merge_candidates", "merge_triangles", "merge_mesh", "quad_energy"]
@@ -358,10 +359,12 @@ def _valence_matching(E, f0, f1, w, n_points, n_faces, valence, vmask, lam, time
 
 
 def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: float = 1.0,
-                    fixed_edges=None, time_limit: float = 60.0, mip_gap: float = 0.01,
-                    min_angle: float = 20.0, max_angle: float = 160.0, max_dihedral: float = 30.0,
-                    min_jacobian: float = 0.3, merge_bonus: float = 0.0, valence_weight: float = 0.0,
-                    valence_vertices=None, form: str = "squared") -> tuple[ShellMesh, MergeResult]:
+                    fixed_edges=None, time_limit: float = MergeOptions.merge_time_limit,
+                    mip_gap: float = MergeOptions.merge_mip_gap, min_angle: float = 20.0, max_angle: float = 160.0,
+                    max_dihedral: float = 30.0, min_jacobian: float = 0.3,
+                    merge_bonus: float = MergeOptions.merge_bonus,
+                    valence_weight: float = MergeOptions.merge_valence_weight, valence_vertices=None,
+                    form: str = "squared") -> tuple[ShellMesh, MergeResult]:
     """Merge pairs of triangles into quads (paper eq. 4-5), solved as a HiGHS MIP.
 
     Parameters
@@ -371,26 +374,28 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
         for the triangles' energy before merging).
     fixed_edges : (k, 2) node pairs never merged; default ``mesh.feature_edges``.
     time_limit, mip_gap : HiGHS ``time_limit`` (s; with the valence term, of each of its two
-        solves) and ``mip_rel_gap``.
+        solves) and ``mip_rel_gap``; default the solver options ``merge_time_limit`` and
+        ``merge_mip_gap`` (:class:`~shellmesh_mdao.options.MergeOptions`, as the other defaults
+        named after an option below).
     min_angle, max_angle : allowed corner angles of a merged quad in degrees (default 20-160:
         a planar quad inside it has scaled Jacobian >= sin 20 deg = 0.34).
     max_dihedral : largest angle (degrees) between the two triangles' normals.
-    merge_bonus : subtracted from every weight (beyond the paper; default 0): a positive
-        value makes merging worthwhile even for pairs of near-equilateral triangles (a
-        60/120 rhombus costs 4/9 c2 more than its two triangles), for a more quad-dominant
-        result; the guards still apply.
+    merge_bonus : subtracted from every weight (beyond the paper; default the solver option
+        ``merge_bonus``, 0 drops it): a positive value makes merging worthwhile even for pairs
+        of near-equilateral triangles (a 60/120 rhombus costs 4/9 c2 more than its two
+        triangles), for a more quad-dominant result; the guards still apply.
     min_jacobian : smallest allowed corner scaled Jacobian of the merged quad, measured
         against the diagonal-cross-product normal (any value > 0 forbids non-convex and
         folded quads; a non-positive value still forbids them).
-    valence_weight : ``lam`` of the valence term (beyond the paper; default 0, off): the
-        objective adds ``lam |valence - 4|`` for each vertex of ``valence_vertices``, its
-        valence counted in the merged mesh (its faces; the subdivision keeps it), since the
-        subdivided quads around a vertex of valence 3, 5 or 6 cannot all be square. Solved as
-        the LP relaxation of that MIP, whose 0/1 merges are kept, and an exact MIP over the
-        edges it leaves fractional (a few hundred at most on the corpus); ``mip_gap`` of the
-        result is measured against the LP's objective, a lower bound on every matching's, and
-        ``status`` is that MIP's (or the LP's when nothing was fractional). ``mip_gap`` the
-        option is not used on this path. An edge joins the candidates while its weight is
+    valence_weight : ``lam`` of the valence term (beyond the paper; default the solver option
+        ``merge_valence_weight``; 0: off): the objective adds ``lam |valence - 4|`` for each
+        vertex of ``valence_vertices``, its valence counted in the merged mesh (its faces; the
+        subdivision keeps it), since the subdivided quads around a vertex of valence 3, 5 or 6
+        cannot all be square. Solved as the LP relaxation of that MIP, whose 0/1 merges are
+        kept, and an exact MIP over the edges it leaves fractional (a few hundred at most on
+        the corpus); ``mip_gap`` of the result is measured against the LP's objective, a lower
+        bound on every matching's, and ``status`` is that MIP's (or the LP's when nothing was
+        fractional). ``mip_gap`` the option is not used on this path. An edge joins the candidates while its weight is
         below ``2 lam`` (its merge can pay at both ends).
     valence_vertices : vertex ids counted by the valence term; default :func:`interior_vertices`
         (not on a boundary, non-manifold or feature edge, not fixed).
@@ -481,13 +486,16 @@ def merge_triangles(mesh: ShellMesh, *, c1: float = 1.0, c2: float = 1.0, c3: fl
     return out, res
 
 
-def merge_mesh(mesh: ShellMesh, supports: Supports | None, locator, infos, *, time_limit: float, mip_gap: float,
-               merge_bonus: float, valence_weight: float) -> tuple[ShellMesh, Supports, dict]:
+def merge_mesh(mesh: ShellMesh, supports: Supports | None, locator, infos,
+               options: MergeOptions = MergeOptions()) -> tuple[ShellMesh, Supports, dict]:
     """The pipeline's merge stage: :func:`merge_triangles` on the whole mesh, the valence term
     counting the nodes free to move within their surface or member plane (``supports``' SURFACE
     and PLANE nodes), and the supports of the result: the split stage's ``supports`` where they
     hold, else derived again (:func:`~shellmesh_mdao.core.supports.pipeline_supports` with the
-    input skin ``locator`` and the members ``infos``).
+    input skin ``locator`` and the members ``infos``). ``options``: the stage's
+    :class:`~shellmesh_mdao.options.MergeOptions` (``merge_time_limit``, ``merge_mip_gap``,
+    ``merge_bonus``, ``merge_valence_weight``: :func:`merge_triangles`' ``time_limit``,
+    ``mip_gap``, ``merge_bonus``, ``valence_weight``).
 
     Returns ``(mesh, supports, report)``, ``report`` the pipeline report's ``merge`` entry."""
     # the valence term counts the nodes free to move within their surface or member plane: on
@@ -495,8 +503,10 @@ def merge_mesh(mesh: ShellMesh, supports: Supports | None, locator, infos, *, ti
     sp = supports
     free = (np.flatnonzero(np.isin(sp.kind, (SURFACE, PLANE)))
             if sp is not None and sp.n == mesh.n_points else None)
-    out, res = merge_triangles(mesh, time_limit=time_limit, mip_gap=mip_gap, merge_bonus=merge_bonus,
-                               valence_weight=valence_weight, valence_vertices=free)
+    o = options
+    out, res = merge_triangles(mesh, time_limit=o.merge_time_limit, mip_gap=o.merge_mip_gap,
+                               merge_bonus=o.merge_bonus, valence_weight=o.merge_valence_weight,
+                               valence_vertices=free)
     # a merge joins two triangles of one component across an edge that is no feature edge: no
     # point, feature edge or fixed vertex changes, nor any vertex's set of incident supports, so
     # the split stage's supports hold as they are (the same arrays as deriving them again)
@@ -507,5 +517,5 @@ def merge_mesh(mesh: ShellMesh, supports: Supports | None, locator, infos, *, ti
     report = {"status": res.status, "objective": float(res.objective), "mip_gap": gap,
               "n_merged": int(res.n_merged), "n_candidates": int(res.n_candidates),
               "quad_fraction": round(float(res.quad_fraction), 4), "seconds": round(res.seconds, 4),
-              "solve_seconds": round(res.solve_seconds, 4), "valence_weight": valence_weight}
+              "solve_seconds": round(res.solve_seconds, 4), "valence_weight": o.merge_valence_weight}
     return out, sup, report

@@ -12,12 +12,13 @@ import numpy as np
 from ..core.supports import SURFACE, Supports
 from ..core.topology import face_rings
 from ..mesh import ShellMesh, norm_rows, vertex_faces
+from ..options import QuadOptions, SmoothOptions
 from ..quality import scaled_jacobian, warp
 from ..smooth import mesh_figures, smooth, smooth_report, untangle
 from .planar import planarize
 from .subdivide import settle_off_surface, subdivide_to_quads
 
-__all__ = ["POOR_JACOBIAN", "OFF_SURFACE_TOL", "quad_mesh", "finish_quads", "finish_region"]
+__all__ = ["POOR_JACOBIAN", "OFF_SURFACE_TOL", "FINAL_MIN_JACOBIAN", "quad_mesh", "finish_quads", "finish_region"]
 
 log = logging.getLogger("shellmesh_mdao")
 
@@ -28,6 +29,10 @@ POOR_JACOBIAN = 0.2
 #: surface are reported (report key ``off_surface``) and logged as a warning.
 OFF_SURFACE_TOL = 1e-6
 
+#: No step of the final smoothing passes may bring an element to or below this scaled Jacobian
+#: (nor lower one already below it): :func:`~shellmesh_mdao.smooth.smooth`'s ``min_jacobian``.
+FINAL_MIN_JACOBIAN = 0.3
+
 
 def _warp_p99(mesh: ShellMesh, w: np.ndarray | None = None) -> float:
     """99th percentile of the quads' warp (degrees; 0 without quads), the acceptance's measure;
@@ -37,10 +42,8 @@ def _warp_p99(mesh: ShellMesh, w: np.ndarray | None = None) -> float:
     return float(np.percentile(warp(mesh.points, mesh.faces)[~mesh.is_tri] if w is None else w[~mesh.is_tri], 99))
 
 
-def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, *, guard_jacobian: float, final_iterations: int,
-              final_refresh: int, final_warp_iterations: int, smooth_energy: str, final_ortho_weight: float,
-              final_warp_weight: float, warp_from: float, warp_goal: float,
-              planar_offset: float) -> tuple[ShellMesh, Supports, dict]:
+def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, options: QuadOptions = QuadOptions(),
+              smooth_options: SmoothOptions = SmoothOptions()) -> tuple[ShellMesh, Supports, dict]:
     """The pipeline's quad stage: one subdivision to all quads (quad -> 4, triangle -> 3) over skin
     and members, new nodes projected onto their supports, then a final smoothing pass; elements
     still at or below
@@ -56,34 +59,38 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, *, guard_jacobia
     (:func:`finish_region`), and the result is kept only if its warp p99 is below the move alone's
     (``warp_term.kept``: ``"pass"`` or ``"planarize_alone"``).
 
-    ``size``: the target quad size; the options are the pipeline's
-    (:class:`~shellmesh_mdao.pipeline.PipelineOptions`, same names). Returns ``(mesh, supports,
-    report)``, ``report`` the pipeline report's entries ``final_smooth`` (with
-    ``final_iterations``), ``poor_repair`` (where elements were repaired), ``off_surface``,
-    ``planarize`` and ``poor_elements``; the warnings are logged (logger ``shellmesh_mdao``)."""
-    q, sup = subdivide_to_quads(mesh, supports, guard_jacobian=guard_jacobian)
+    ``size``: the target quad size; ``options``: the stage's
+    :class:`~shellmesh_mdao.options.QuadOptions` (the names above are its options), and the
+    smooth stage's ``smooth_energy`` and ``warp_from`` from ``smooth_options``
+    (:class:`~shellmesh_mdao.options.SmoothOptions`); no step of either pass brings an element to
+    or below :data:`FINAL_MIN_JACOBIAN`. Returns ``(mesh, supports, report)``, ``report`` the
+    pipeline report's entries ``final_smooth`` (with ``final_iterations``), ``poor_repair``
+    (where elements were repaired), ``off_surface``, ``planarize`` and ``poor_elements``; the
+    warnings are logged (logger ``shellmesh_mdao``)."""
+    o, so = options, smooth_options
+    q, sup = subdivide_to_quads(mesh, supports, guard_jacobian=o.guard_jacobian)
     warp_term = None
     done = None
-    if final_iterations:
+    if o.final_iterations:
         # the first pass's figures after it are taken only if no second pass follows
-        q, res = smooth(q, sup, iterations=final_iterations, energy=smooth_energy, target_edge=size,
-                        ortho_weight=final_ortho_weight, refresh=final_refresh, figures="before")
+        q, res = smooth(q, sup, iterations=o.final_iterations, energy=so.smooth_energy, target_edge=size,
+                        ortho_weight=o.final_ortho_weight, refresh=o.final_refresh, warp_weight=0.0,
+                        min_jacobian=FINAL_MIN_JACOBIAN, figures="before")
         # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
         # where the warp p99 acceptance is missed and the planarize move alone cannot meet it
         wq = warp(q.points, q.faces)
         p99 = _warp_p99(q, wq)
-        warp_term = {"warp_p99_before": p99, "warp_goal": warp_goal, "applied": False}
-        second_pass = final_warp_weight > 0 and (warp_goal <= 0 or p99 > warp_goal)
+        warp_term = {"warp_p99_before": p99, "warp_goal": o.warp_goal, "applied": False}
+        second_pass = o.final_warp_weight > 0 and (o.warp_goal <= 0 or p99 > o.warp_goal)
         trial = None
-        if second_pass and planar_offset > 0 and warp_goal > 0:
+        if second_pass and o.planar_offset > 0 and o.warp_goal > 0:
             # first the cheap way: the planarize move (and the settle and repair before it) on
             # this pass's mesh; kept if it meets the goal, else the second pass runs on this
             # pass's mesh, around the quads that move left above the goal
-            trial = finish_quads(q, sup, size, guard_jacobian=guard_jacobian, planar_offset=planar_offset,
-                                 warp_goal=warp_goal)
+            trial = finish_quads(q, sup, size, options=o)
             alone = trial["planar"]["warp_p99_after"]
             warp_term["planarize_alone_p99"] = alone
-            if alone <= warp_goal:
+            if alone <= o.warp_goal:
                 done, second_pass = trial, False
         if second_pass:
             # only around the quads still warped (two rings): the rest of the mesh keeps the first
@@ -92,9 +99,9 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, *, guard_jacobia
             vptr, vface = vertex_faces(q.faces, q.n_points)
             if trial is not None:
                 tm = trial["mesh"]
-                seeds = warp(tm.points, tm.faces) > warp_goal
+                seeds = warp(tm.points, tm.faces) > o.warp_goal
             else:
-                seeds = wq > warp_from
+                seeds = wq > so.warp_from
             warp_term["seed_quads"] = int(seeds.sum())
             warped = np.unique(q.faces[seeds])
             region = face_rings(q.faces, vptr, vface, warped[warped >= 0], 2)
@@ -108,10 +115,11 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, *, guard_jacobia
                 start = tm.points.copy()
                 start[movable] = trial["before_planar"].points[movable]
                 q = q.with_points(start)
-            q, res2 = smooth(q, sup, iterations=final_warp_iterations, energy=smooth_energy,
-                             target_edge=size, ortho_weight=final_ortho_weight,
-                             warp_weight=final_warp_weight, warp_from=warp_from, vertices=movable,
-                             figures="after")
+            # every quad above warp_from in the term (warp_spread 180: none left out)
+            q, res2 = smooth(q, sup, iterations=o.final_warp_iterations, energy=so.smooth_energy,
+                             target_edge=size, ortho_weight=o.final_ortho_weight,
+                             warp_weight=o.final_warp_weight, warp_from=so.warp_from, warp_spread=180.0,
+                             min_jacobian=FINAL_MIN_JACOBIAN, vertices=movable, figures="after")
             res = dataclasses.replace(
                 res2, quality_before=res.quality_before, moves=res.moves + res2.moves,
                 max_move=max(res.max_move, res2.max_move),
@@ -122,8 +130,7 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, *, guard_jacobia
             if trial is not None:
                 # the pass and the move after it must beat the move alone, else the move alone
                 # on the first pass's mesh is kept (its scaled Jacobians are the better ones)
-                done = finish_region(q, sup, size, movable, trial, planar_offset=planar_offset,
-                                     warp_goal=warp_goal)
+                done = finish_region(q, sup, size, movable, trial, options=o)
                 if done["planar"]["warp_p99_after"] >= trial["planar"]["warp_p99_after"]:
                     done, (q, res) = trial, first
                     res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, size))
@@ -133,14 +140,13 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, *, guard_jacobia
         else:
             res = dataclasses.replace(res, quality_after=mesh_figures(q, sup, size))
     if done is None:
-        done = finish_quads(q, sup, size, guard_jacobian=guard_jacobian, planar_offset=planar_offset,
-                            warp_goal=warp_goal)
+        done = finish_quads(q, sup, size, options=o)
     q, sj, poor = done["mesh"], done["sj"], done["poor"]
     off_surface, warning = _off_surface(done, sup, size)
     if warning:
         log.warning(warning)
     report: dict = {}
-    if final_iterations:
+    if o.final_iterations:
         report["final_smooth"] = smooth_report(res)
         report["final_smooth"]["warp_term"] = warp_term
     if done["repair"] is not None:
@@ -180,22 +186,23 @@ def _repair_poor(q: ShellMesh, sup, sj):
     return q, sj, poor, repair
 
 
-def _planarize(q: ShellMesh, sup, sj, poor, size: float, planar_offset: float, warp_goal: float,
-               vertices=None):
+def _planarize(q: ShellMesh, sup, sj, poor, size: float, options: QuadOptions, vertices=None):
     """The quad stage's :func:`~shellmesh_mdao.quad.planarize` move on ``q`` (scaled Jacobians
-    ``sj``, poor elements ``poor``), moving only ``vertices`` if given. Returns ``(q, planar, sj,
-    poor)``, ``planar`` the report's figures (with the offset over the size and its bound)."""
-    q, planar = planarize(q, sup, max_offset=planar_offset * size, warp_above=warp_goal,
+    ``sj``, poor elements ``poor``), by at most ``options.planar_offset`` times ``size``, on the
+    quads warped above ``options.warp_goal``, moving only ``vertices`` if given. Returns ``(q,
+    planar, sj, poor)``, ``planar`` the report's figures (with the offset over the size and its
+    bound)."""
+    q, planar = planarize(q, sup, max_offset=options.planar_offset * size, warp_above=options.warp_goal,
                           guard_jacobian=POOR_JACOBIAN + 0.1, vertices=vertices)
-    planar.update(max_offset_over_size=planar["max_offset"] / size, bound_over_size=planar_offset)
+    planar.update(max_offset_over_size=planar["max_offset"] / size, bound_over_size=options.planar_offset)
     if planar["applied"]:
         sj = scaled_jacobian(q.points, q.faces)
         poor = np.flatnonzero(sj <= POOR_JACOBIAN)
     return q, planar, sj, poor
 
 
-def finish_region(q: ShellMesh, sup, size: float, movable, trial: dict, *, planar_offset: float,
-                  warp_goal: float) -> dict:
+def finish_region(q: ShellMesh, sup, size: float, movable, trial: dict,
+                  options: QuadOptions = QuadOptions()) -> dict:
     """:func:`finish_quads` after the second pass, which started from the planarize trial's
     mesh and moved only the nodes ``movable``: the elements at or below :data:`POOR_JACOBIAN`
     repaired, then :func:`~shellmesh_mdao.quad.planarize` moving only ``movable`` (outside the
@@ -203,7 +210,8 @@ def finish_region(q: ShellMesh, sup, size: float, movable, trial: dict, *, plana
     the trial settled the rest). ``before_planar``: the nodes that kept the trial's positions at
     the trial's positions before its move. The same keys as :func:`finish_quads`; ``planar``'s
     ``moved`` and ``max_offset`` count the trial's moves that stand as well, and ``repair`` is
-    the trial's where the region needed none."""
+    the trial's where the region needed none. ``options``: the quad stage's
+    :class:`~shellmesh_mdao.options.QuadOptions` (``planar_offset``, ``warp_goal``)."""
     q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
     held = np.ones(q.n_points, bool)
     held[movable] = False
@@ -211,7 +219,7 @@ def finish_region(q: ShellMesh, sup, size: float, movable, trial: dict, *, plana
     bp = q.points.copy()
     bp[held] = trial["before_planar"].points[held]
     before_planar = q.with_points(bp)
-    q, planar, sj, poor = _planarize(q, sup, sj, poor, size, planar_offset, warp_goal, vertices=movable)
+    q, planar, sj, poor = _planarize(q, sup, sj, poor, size, options, vertices=movable)
     # the report counts every node off the facets in the result: the region's moves and the
     # trial's that stand outside it ("nodes": the region's candidates and those)
     step = norm_rows(q.points - bp, axis=1)
@@ -224,25 +232,25 @@ def finish_region(q: ShellMesh, sup, size: float, movable, trial: dict, *, plana
             "settled": trial["settled"], "before_planar": before_planar, "planar": planar}
 
 
-def finish_quads(q: ShellMesh, sup, size: float, *, guard_jacobian: float, planar_offset: float,
-                 warp_goal: float) -> dict:
+def finish_quads(q: ShellMesh, sup, size: float, options: QuadOptions = QuadOptions()) -> dict:
     """The quad stage after its smoothing, on ``q``: skin nodes left off the surface settled,
     elements at or below :data:`POOR_JACOBIAN` repaired, then :func:`~shellmesh_mdao.quad.planarize`.
     Returns ``{"mesh", "sj", "poor", "repair", "settled", "before_planar", "planar"}``
     (``before_planar``: the mesh before planarize, whose nodes off the surface
     :func:`_off_surface` reports for the result the caller keeps); ``q`` and ``sup`` are not
-    changed."""
+    changed. ``options``: the quad stage's :class:`~shellmesh_mdao.options.QuadOptions`
+    (``guard_jacobian``, ``planar_offset``, ``warp_goal``)."""
     # skin nodes the subdivision's fold guard left off the surface: once their neighbours have
     # been smoothed most of them can go onto it (the same settle, no element below the guard
     # made worse)
-    q, settled = settle_off_surface(q, sup, tol=OFF_SURFACE_TOL, guard_jacobian=guard_jacobian)
+    q, settled = settle_off_surface(q, sup, tol=OFF_SURFACE_TOL, guard_jacobian=options.guard_jacobian)
     q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
     before_planar = q
     # quads still warped above the goal straddle kinks of the faceted input that no move along it
     # can flatten: their free skin nodes leave the facets by at most planar_offset * size
     planar = None
-    if planar_offset > 0:
-        q, planar, sj, poor = _planarize(q, sup, sj, poor, size, planar_offset, warp_goal)
+    if options.planar_offset > 0:
+        q, planar, sj, poor = _planarize(q, sup, sj, poor, size, options)
     return {"mesh": q, "sj": sj, "poor": poor, "repair": repair, "settled": settled, "before_planar": before_planar,
             "planar": planar}
 

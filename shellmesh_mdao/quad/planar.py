@@ -10,6 +10,7 @@ from ..core.supports import SURFACE, Supports, support_normals
 from ..core.topology import face_rings
 from ..errors import MeshValidationError
 from ..mesh import ShellMesh, cross_rows, norm_rows, vertex_faces
+from ..options import QuadOptions
 from ..quality import element_quality
 from ..smooth import LDL, draped_vertices, face_normals
 
@@ -65,10 +66,10 @@ def _bounded_least_squares(A, b, reg, bound, max_rounds: int = 50, start=None, l
     return np.clip(x, -bound, bound), lam
 
 
-def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_above: float = 10.0,
-              local_fraction: float = 0.15, guard_jacobian: float = 0.3, iterations: int = 6,
-              regularisation: float = 1e-3, rings: int = 2, aim: float | None = None, flat_angle: float = 0.5,
-              draped_angle: float = 60.0, vertices=None) -> tuple[ShellMesh, dict]:
+def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float,
+              warp_above: float = QuadOptions.warp_goal, local_fraction: float = 0.15, guard_jacobian: float = 0.3,
+              iterations: int = 6, regularisation: float = 1e-3, rings: int = 2, aim: float | None = None,
+              flat_angle: float = 0.5, draped_angle: float = 60.0, vertices=None) -> tuple[ShellMesh, dict]:
     """Flatten the skin quads warped more than ``warp_above`` degrees by moving SURFACE nodes
     along their vertex normal, off the input facets by at most ``max_offset`` (a length) and at
     most ``local_fraction`` times the mean edge of the quads around the node.
@@ -92,8 +93,10 @@ def planarize(mesh: ShellMesh, supports: Supports, *, max_offset: float, warp_ab
     Jacobian is at or below ``guard_jacobian`` gets worse, none above falls to it and none
     turns over: the offsets of the nodes of such an element are halved (ten times, then
     dropped). The result is kept only if fewer quads are warped above ``warp_above`` than
-    before. ``vertices``: ids of the nodes that may move (default None: every node the rules
-    above allow); the others keep their positions. Same input, same offsets.
+    before. ``warp_above``: default the solver option ``warp_goal``
+    (:class:`~shellmesh_mdao.options.QuadOptions`), as the quad stage passes. ``vertices``: ids
+    of the nodes that may move (default None: every node the rules above allow); the others
+    keep their positions. Same input, same offsets.
 
     Returns ``(mesh, info)`` with ``info`` = ``{"applied", "nodes", "moved", "max_offset",
     "quads_above_before", "quads_above_after", "halvings", "warp_p99_before",

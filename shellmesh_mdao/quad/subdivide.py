@@ -35,6 +35,7 @@ from ..core.supports import CURVE, FIXED, SURFACE, Supports
 from ..core.topology import face_rings
 from ..errors import MeshValidationError
 from ..mesh import ShellMesh, norm_rows, vertex_faces
+from ..options import QuadOptions
 from ..smooth import element_min_sj, face_normals, oriented_quality, untangle
 
 __all__ = ["subdivide_to_quads", "subdivide_faces", "settle_off_surface"]
@@ -134,8 +135,8 @@ def _settle(mesh: ShellMesh, supports: Supports, nodes, X_proj, parent_normal, t
 
 
 def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 0.0,
-                       project: bool = True, guard_jacobian: float = 0.2, settle: bool = True,
-                       settle_iterations: int = 100) -> tuple[ShellMesh, Supports]:
+                       project: bool = True, guard_jacobian: float = QuadOptions.guard_jacobian,
+                       settle: bool = True, settle_iterations: int = 100) -> tuple[ShellMesh, Supports]:
     """Split every quad into 4 quads and every triangle into 3 quads (whole mesh at once).
 
     Parameters
@@ -147,7 +148,8 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
     project : project the new nodes onto their supports (default True).
     guard_jacobian : a child whose scaled Jacobian the projection would bring to or below this
         value (and below its unprojected value) keeps its new nodes at their linear position
-        (edge midpoint, face centroid) instead: no subdivision step folds an element.
+        (edge midpoint, face centroid) instead: no subdivision step folds an element. Default
+        the solver option ``guard_jacobian`` (:class:`~shellmesh_mdao.options.QuadOptions`).
     settle : then put those guarded nodes onto their supports after all and repair the
         elements around them by moving vertices along their supports (up to
         ``settle_iterations`` rounds of :func:`~shellmesh_mdao.smooth.untangle` with goal
@@ -262,8 +264,9 @@ def subdivide_to_quads(mesh: ShellMesh, supports: Supports, *, min_dot: float = 
     return out, sup
 
 
-def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6, guard_jacobian: float = 0.2,
-                       iterations: int = 100, min_dot: float = 0.0) -> tuple[ShellMesh, dict]:
+def settle_off_surface(mesh: ShellMesh, supports: Supports, *, tol: float = 1e-6,
+                       guard_jacobian: float = QuadOptions.guard_jacobian, iterations: int = 100,
+                       min_dot: float = 0.0) -> tuple[ShellMesh, dict]:
     """Put the SURFACE nodes that lie farther than ``tol`` times the model's bounding-box
     diagonal from their support back onto it, repairing the elements around them as the
     subdivision's ``settle`` does (:func:`~shellmesh_mdao.smooth.untangle` on the two rings

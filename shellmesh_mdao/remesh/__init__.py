@@ -37,9 +37,9 @@ remeshed skins kept across runs), ``kernels`` (the compiled loops only the remes
 """
 from __future__ import annotations
 
-from .driver import DEFAULT_DEVIATION_FRACTION, DEFAULT_MIN_EDGE_FRACTION, remesh_skin, remesh_statistics
 from .cache import DEFAULT_REMESH_CACHE, RemeshCache
+from .driver import DEFAULT_MIN_EDGE_FRACTION, remesh_skin, remesh_statistics
 from .improve import improve_triangles
 
-__all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION",
-           "DEFAULT_MIN_EDGE_FRACTION", "RemeshCache", "DEFAULT_REMESH_CACHE"]
+__all__ = ["remesh_skin", "improve_triangles", "remesh_statistics", "DEFAULT_MIN_EDGE_FRACTION", "RemeshCache",
+           "DEFAULT_REMESH_CACHE"]

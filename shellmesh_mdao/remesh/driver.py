@@ -10,17 +10,15 @@ from ..errors import MeshValidationError, SizeError
 from .kernels import edge_lengths, group_order
 from ..mesh import ShellMesh, dot_norm_rows, dot_rows, dot_unit_rows, reduce_short
 from ..core.locator import SurfaceLocator
+from ..options import RemeshOptions
 from .common import CORNER, REGULAR, SPLIT_RATIO, tri_angles
 from .operations import collapse_edges, collapse_round, faces_facing_ok, flip_round, micro_round, phase, split_round
 from .relax import relax_vertices
 from .surface import InputSurface
 from .work import Context, WorkMesh
 
-__all__ = ["remesh_skin", "remesh_statistics", "DEFAULT_DEVIATION_FRACTION", "DEFAULT_MIN_EDGE_FRACTION"]
+__all__ = ["remesh_skin", "remesh_statistics", "DEFAULT_MIN_EDGE_FRACTION"]
 
-#: ``max_deviation`` defaults to this fraction of ``target_edge`` (the final quads, half
-#: as long, then deviate about a quarter of it: 0.05 of the final quad size).
-DEFAULT_DEVIATION_FRACTION = 0.1
 #: the curvature-adapted edge length never goes below this fraction of ``target_edge``.
 DEFAULT_MIN_EDGE_FRACTION = 0.1
 
@@ -196,14 +194,11 @@ def _deviation(W, ctx, mids):
     return dm, dc, ctri, ok
 
 
-def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 30.0,
-                max_deviation: float | None = None, iterations: int = 8, min_edge: float | None = None,
-                gradation: float = 0.5, corner_angle: float = 50.0, wedge_angle: float = 20.0,
-                keep_component_borders: bool = True,
-                deviation_passes: int = 2, deviation_pass_fraction: float = 0.0, deviation_splits: bool = True,
-                finish_rounds: int = 4,
-                max_flip_dihedral: float = 120.0,
-                locator: SurfaceLocator | None = None,
+def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = RemeshOptions(), *,
+                locator: SurfaceLocator | None = None, feature_angle: float = 30.0, iterations: int = 8,
+                min_edge: float | None = None, gradation: float = 0.5, corner_angle: float = 50.0,
+                wedge_angle: float = 20.0, keep_component_borders: bool = True, deviation_passes: int = 2,
+                deviation_splits: bool = True, finish_rounds: int = 4, max_flip_dihedral: float = 120.0,
                 report: dict | None = None, log=None) -> ShellMesh:
     """Isotropic, curvature-adapted remesh of a triangulated skin to ``target_edge``.
 
@@ -226,15 +221,21 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         boundaries are allowed and kept as feature lines.
     target_edge : float
         Edge length wanted on flat regions (about twice the final quad size ``H``).
+    options : RemeshOptions
+        The remesh stage's options (:class:`~shellmesh_mdao.options.RemeshOptions`):
+        ``remesh_deviation``, the chordal deviation allowed as a fraction of ``target_edge``
+        (``max_deviation = remesh_deviation * target_edge``: the chordal deviation allowed
+        between the remesh and the input, an absolute length; edges shrink where the
+        curvature needs it, down to ``min_edge``; feature lines closer to each other than
+        ``2 * max_deviation`` (a wedge at a sharp trailing-edge tip, the two creases of a
+        coarsely faceted leading edge, a sliver patch) are merged into one), and
+        ``remesh_pass_fraction`` (see ``deviation_passes``); ``remesh`` is the stage's
+        switch and is not read here.
+    locator : SurfaceLocator, optional
+        A locator already built on the triangles of ``mesh`` (saves rebuilding it).
     feature_angle : float
         Input edges whose two triangles' normals differ by more than this (degrees) are
         sharp feature lines: kept as chains of mesh edges.
-    max_deviation : float, optional
-        Chordal deviation allowed between the remesh and the input (absolute length);
-        default ``DEFAULT_DEVIATION_FRACTION * target_edge``. Edges shrink where the
-        curvature needs it, down to ``min_edge``. Feature lines closer to each other than
-        ``2 * max_deviation`` (a wedge at a sharp trailing-edge tip, the two creases of a
-        coarsely faceted leading edge, a sliver patch) are merged into one.
     iterations : int
         Split/collapse/flip/relax sweeps (Botsch--Kobbelt) per pass.
     min_edge : float, optional
@@ -254,10 +255,9 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
     deviation_passes : int
         Extra passes that shrink the sizing where the measured deviation exceeds
         ``max_deviation`` and remesh again (each re-runs ``iterations // 2`` sweeps and the
-        finishing rounds over the whole skin).
-    deviation_pass_fraction : float
-        A pass runs only while more than this fraction of the edges deviate (default 0: any
-        edge); fewer are left to the deviation splits, which split them where they are.
+        finishing rounds over the whole skin). A pass runs only while more than
+        ``options.remesh_pass_fraction`` of the edges deviate (0: any edge); fewer are left to
+        the deviation splits, which split them where they are.
     deviation_splits : bool
         Finally split the edges still deviating too much (see the guarantee above).
     finish_rounds : int
@@ -266,8 +266,6 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         Largest dihedral (degrees) across which an edge may be flipped during remeshing
         (every flip must also keep the new edge within ``max_deviation`` and not turn a
         triangle against the input normal).
-    locator : SurfaceLocator, optional
-        A locator already built on the triangles of ``mesh`` (saves rebuilding it).
     report : dict, optional
         Filled with figures: counts, edge-length percentiles relative to the target,
         angles, deviation, timings.
@@ -312,9 +310,9 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
     if est > 5e7:
         raise SizeError(f"target edge length {target:g} would give about {est:.3g} triangles on a skin of "
                         f"area {area:.4g}: give a larger size (in the units of the surface file)")
-    delta = DEFAULT_DEVIATION_FRACTION * target if max_deviation is None else float(max_deviation)
+    delta = options.remesh_deviation * target
     if not np.isfinite(delta) or delta <= 0:
-        raise SizeError(f"max_deviation {max_deviation!r} must be positive: give a positive length")
+        raise SizeError(f"max_deviation {delta!r} must be positive: give a positive length")
     h_min = DEFAULT_MIN_EDGE_FRACTION * target if min_edge is None else float(min_edge)
     if not np.isfinite(h_min) or h_min <= 0 or h_min > target:
         raise SizeError(f"min_edge {min_edge!r} must be positive and at most target_edge")
@@ -342,7 +340,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, *, feature_angle: float = 3
         E = T.E
         L = edge_lengths(W.P, E)
         over = (dm > delta) & (L > SPLIT_RATIO * h_min)
-        if not over.any() or over.sum() <= deviation_pass_fraction * len(over):
+        if not over.any() or over.sum() <= options.remesh_pass_fraction * len(over):
             break
         passes += 1
         # shrink the field at the input triangles under the offending edges

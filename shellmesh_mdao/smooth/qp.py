@@ -15,11 +15,12 @@ from ..core.topology import faces_of
 from ..errors import MeshValidationError
 from .kernels import ReducedHessian, nearest_other_distance, pair_difference
 from ..mesh import ShellMesh, dot_norm_rows, dot_unit_rows, edge_topology, vertex_faces
+from ..options import SmoothOptions
 from .elements import element_min_sj, face_normals, mesh_figures
 from .energy import OrthoTerm, WarpTerm, energy_pairs, tangent_frames, vertex_normals_and_curvature
 from .linear import LDL, LinearSolver, solve_kkt
 
-__all__ = ["AUTO_LU_MAX_UNKNOWNS", "SmoothResult", "smooth", "smooth_report"]
+__all__ = ["AUTO_LU_MAX_UNKNOWNS", "SmoothResult", "smooth", "smooth_report", "smooth_mesh"]
 
 #: ``solver="auto"`` factorises with sparse LU up to this many unknowns and uses
 #: Jacobi-preconditioned CG above. 0: CG always. At :data:`.linear.CG_RTOL` 1e-3 the smoothing before
@@ -68,13 +69,20 @@ def smooth_report(res) -> dict:
             "quality_after": res.quality_after}
 
 
-def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy: str = "length",
-           target_edge: float | None = None, diagonal_weight: float = 0.0, ortho_weight: float = 1.0,
-           warp_weight: float = 0.0, warp_from: float = 7.0, warp_spread: float = 180.0, vertices=None,
-           trust: float = 0.3, reg: float = 0.25, curvature_weight: float = 10.0, refresh: int = 4,
-           min_jacobian: float = 0.3, max_halvings: int = 6, min_dot: float = 0.0, tol: float = 1e-4,
-           solver: str = "auto", figures: str = "both") -> tuple[ShellMesh, SmoothResult]:
+def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptions.smooth_iterations,
+           energy: str = SmoothOptions.smooth_energy, target_edge: float | None = None, diagonal_weight: float = 0.0,
+           ortho_weight: float = 1.0, warp_weight: float = SmoothOptions.smooth_warp_weight,
+           warp_from: float = SmoothOptions.warp_from, warp_spread: float = SmoothOptions.smooth_warp_spread,
+           vertices=None, trust: float = 0.3, reg: float = 0.25, curvature_weight: float = 10.0, refresh: int = 4,
+           min_jacobian: float = SmoothOptions.smooth_jacobian, max_halvings: int = 6, min_dot: float = 0.0,
+           tol: float = 1e-4, solver: str = "auto", figures: str = "both") -> tuple[ShellMesh, SmoothResult]:
     """Move vertices along their supports to even out the mesh (paper eq. 6-8).
+
+    The defaults of the keywords the smooth stage sets from its options are those options'
+    (:class:`~shellmesh_mdao.options.SmoothOptions`): ``iterations`` ``smooth_iterations``,
+    ``energy`` ``smooth_energy``, ``warp_weight`` ``smooth_warp_weight``, ``warp_from``
+    ``warp_from``, ``warp_spread`` ``smooth_warp_spread``, ``min_jacobian``
+    ``smooth_jacobian``; ``ortho_weight`` and ``refresh`` are the smooth stage's too.
 
     Parameters
     ----------
@@ -82,11 +90,12 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
     supports : :class:`~shellmesh_mdao.core.supports.Supports` of its vertices
         (:func:`~shellmesh_mdao.core.supports.derive_supports`).
     iterations : maximum number of trust-region steps.
-    energy : ``"length"`` (default): the sum of edge LENGTHS, which the paper states as the
+    energy : ``"length"``: the sum of edge LENGTHS, which the paper states as the
         goal, through its local quadratic model: pair weights ``1/L`` with ``L`` the length
         at the last refresh, so the gradient is the sum of unit edge vectors at each vertex
         (equilibrium: balanced edge directions, scale-free, keeps size gradation);
-        ``"squared"``: eq. 6/7 as printed, sum of squared lengths (uniform Laplacian).
+        ``"squared"`` (the default): eq. 6/7 as printed, sum of squared lengths (uniform
+        Laplacian).
     target_edge : with ``energy="squared"``: each edge aims at this length and each quad
         diagonal at sqrt(2) times it (rest vectors along the current directions). With
         either energy it is the ``size`` of the reported ``median_edge_ratio``.
@@ -96,14 +105,14 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
         :class:`OrthoTerm`): zero for right-angled corners of any aspect ratio.
     warp_weight : weight of the quad planarity term (beyond the paper; see :class:`WarpTerm`),
         which flattens the quads whose warp is above ``warp_from`` degrees (measured when the
-        frames are rebuilt) by sliding their corners along their supports; 0 (default) drops
-        it. Not with ``solver="kkt"``.
+        frames are rebuilt) by sliding their corners along their supports; 0 drops it. Not
+        with ``solver="kkt"``.
     warp_from : warp (degrees) above which a quad is in the planarity term.
     warp_spread : a quad that shares a vertex with a face (itself included) whose corners'
         support normals (input facets, member planes) are more than this many degrees apart
         is left out of the planarity term: that face is draped over a crease or round much
         tighter than itself and cannot be flattened by sliding its corners, and pulling at it
-        or beside it drags nodes across the crease. Default 180 (none left out).
+        or beside it drags nodes across the crease. 180: none left out.
     vertices : ids of the vertices that may move (default None: all); the others hold
         still, as if FIXED, and only constrain the step (fold guard, energy). Only the faces at
         them take part (the same result as over the whole mesh with the others FIXED, bit for
@@ -318,3 +327,23 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = 20, energy:
                        n_fold_hits=n_fold, n_jump_hits=n_jump, quality_before=before,
                        quality_after=mesh_figures(out, supports, target_edge) if figures in ("both", "after") else {})
     return out, res
+
+
+def smooth_mesh(mesh: ShellMesh, supports: Supports, target_edge: float,
+                options: SmoothOptions = SmoothOptions()) -> tuple[ShellMesh, dict]:
+    """The pipeline's smooth stage: :func:`smooth` on the whole merged mesh before subdivision,
+    edges aiming at ``target_edge`` (the remesh edge length) with the ``"squared"`` energy, with
+    the stage's :class:`~shellmesh_mdao.options.SmoothOptions` (``smooth_iterations`` steps, no
+    step bringing an element to or below ``smooth_jacobian``, energy ``smooth_energy``, the quad
+    planarity term ``smooth_warp_weight`` above ``warp_from`` degrees, leaving out the quads by
+    faces draped more than ``smooth_warp_spread``).
+
+    Returns ``(mesh, report)``, ``report`` the pipeline report's ``smooth`` entry
+    (:func:`smooth_report`)."""
+    o = options
+    # a triangle's scaled Jacobian bounds its three child quads' after subdivision: keep every
+    # element above smooth_jacobian (0.4: triangle angles >= ~20 deg, children above ~0.3)
+    out, res = smooth(mesh, supports, iterations=o.smooth_iterations, min_jacobian=o.smooth_jacobian,
+                      energy=o.smooth_energy, target_edge=target_edge, warp_weight=o.smooth_warp_weight,
+                      warp_from=o.warp_from, warp_spread=o.smooth_warp_spread)
+    return out, smooth_report(res)
