@@ -137,3 +137,20 @@ def test_straight_wing_full_chord_ribs_refused_alike_at_every_size(geometry_dir,
     assert msgs[0] == msgs[1] == msgs[2]
     assert msgs[0].startswith("full-chord members cut a sharp edge of the skin: 'wing/rib_0': a 6.9 deg corner")
     assert all(f"'wing/rib_{i}'" in msgs[0] for i in range(4))
+
+
+@pytest.mark.slow
+def test_rib_whose_section_leaves_its_skin_side_is_refused_clearly(geometry_dir, manifest):
+    """straight_wing, 10 ribs, spars 0.15/0.65, size 0.04875: the root rib's upper section on the
+    working skin crossed to the lower side near its forward spar end (0.017 tall there); the
+    fallback cut was kept anyway and the lower chain then failed as 'broken into pieces'. Now the
+    upper chain is refused, naming the rib, its ends and the place; at 0.04333 it meshes (~5 s)."""
+    from shellmesh_mdao.layout import layout_from_manifest
+    from shellmesh_mdao.pipeline import run_pipeline
+    lay = layout_from_manifest(manifest, "straight_wing", ribs=10, spars=[0.15, 0.65])
+    with pytest.raises(ImprintError, match=r"wing/rib_0 \(upper\): its curve on the skin does not run between its "
+                                           r"ends \[-0\.1, -1\.95, .*\] and \[-0\.6, -1\.95, .*\]: it leaves that "
+                                           r"skin side near .*move the member away"):
+        run_pipeline(geometry_dir / "straight_wing.stl", lay, 0.04875, until="imprint", progress=False)
+    res = run_pipeline(geometry_dir / "straight_wing.stl", lay, 0.04333, until="members", progress=False)
+    assert res.stage == "members"

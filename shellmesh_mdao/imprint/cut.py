@@ -604,6 +604,8 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             if not clean and snap > snap_fallback:
                 cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap_fallback, end_vertices=endv)
                 used = snap_fallback
+            if endv is not None and not _keeps_crossings(cut[3], np.zeros(0, np.int64), endv):
+                _raise_off_ends(spec, cut[0], cut[3], endv)
         except ImprintError as e:
             # the skin is as before this chain (a cut returns new arrays): go on with the others,
             # so that one refusal names every chain that cannot be imprinted
@@ -652,6 +654,22 @@ def _raise_failed(failed, chains, arcs, P, T) -> None:
     if len(parts) == 1:
         raise ImprintError(parts[0])
     raise ImprintError(f"{len(parts)} member curves could not be imprinted at this --size: " + " | ".join(parts))
+
+
+def _raise_off_ends(spec, P, chain_v, end_vertices) -> None:
+    """An open chain that does not run between its two end vertices: the working skin's section
+    through the member's seed left the member's own skin side (a skin face there spans from one
+    side of the wing to the other, where the wing is thinner than the skin's edges) and came
+    back along the other side. The chain would fold the skin; refuse it, naming the member, its
+    ends and where the section left them."""
+    ends = [int(v) for v in end_vertices]
+    off = [int(v) for v in (chain_v[0], chain_v[-1]) if int(v) not in ends]
+    far = off[0] if off else int(chain_v[len(chain_v) // 2])
+    raise ImprintError(f"{spec.member} ({spec.side}): its curve on the skin does not run between its ends "
+                       f"{fmt_point(P[ends[0]])} and {fmt_point(P[ends[1]])}: it leaves that skin side near "
+                       f"{fmt_point(P[far])} (a skin face there spans both sides of the wing: the member lies within "
+                       "about an element of the end of the skin or of a thin edge); move the member away from that "
+                       "end or edge in the layout (by a few element sizes), or use a smaller --size")
 
 
 def _keeps_crossings(chain_v, must, end_vertices) -> bool:
