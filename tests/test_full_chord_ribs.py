@@ -165,13 +165,15 @@ def test_swept_wing_seed3(geometry_dir, manifest):
 def test_full_chord_rib_through_a_sharp_edge_is_refused(geometry_dir, manifest):
     """The straight wing's leading edge is a 6.9-degree wedge: a full-chord rib (one spar) has a
     corner that sharp, where no quad can have a scaled Jacobian above sin(6.9 deg) = 0.12 (stress
-    seed 42 left one such quad per rib). The members stage refuses it, naming the rib, the corner
-    and the fix; the sweep's independent section check agrees that the layout is tight."""
+    seed 42 left one such quad per rib). The imprint refuses it from the exact sections, naming
+    every such rib, its corner and the fix; the sweep's independent section check agrees that the
+    layout is tight."""
     from shellmesh_mdao.errors import LayoutError
     lay = layout_from_manifest(manifest, "straight_wing", ribs=[0.2, 0.5, 0.8], spars=[0.5])
-    with pytest.raises(LayoutError, match=r"member 'wing/rib_0' cuts a sharp edge of the skin: its outline has a "
-                                          r"[5-9]\.\d deg corner at \[-0.75, .*below the 0.2 guarantee at any "
-                                          r"element size; end the rib on spars"):
+    with pytest.raises(LayoutError, match=r"full-chord members cut a sharp edge of the skin: 'wing/rib_0': a "
+                                          r"[5-9]\.\d deg corner at \[-0.75, .*'wing/rib_1'.*'wing/rib_2'.*below "
+                                          r"the 0.2 scaled-Jacobian guarantee at any element size; end the ribs on "
+                                          r"spars"):
         pl.run_pipeline(geometry_dir / "straight_wing.stl", lay, 0.05, until="members", progress=False)
     t = SL.layout_tightness(manifest, {"geometry": "straight_wing", "ribs": [0.2, 0.5, 0.8], "spars": [0.5],
                                        "size": 0.05}, geometry_dir)

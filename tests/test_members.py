@@ -273,7 +273,7 @@ def test_members_crossing_without_meeting_on_the_skin_is_a_layout_error():
               line_chain(skin, "b", "upper", [0.1, 0.5, 1.0], [0.4, 0.5, 1.0], 3),
               line_chain(skin, "b", "lower", [0.6, 0.5, 0.0], [0.9, 0.5, 0.0], 3)]
     infos = [MemberInfo("a", "explicit", [0.5, 0, 0], [1, 0, 0]), MemberInfo("b", "explicit", [0, 0.5, 0], [0, 1, 0])]
-    with pytest.raises(LayoutError, match=r"'a' and 'b' cross"):
+    with pytest.raises(LayoutError, match=r"'a' and 'b' \(near \[0\.5, 0\.5, 0\.5\]\) cross"):
         build_members(skin, chains, infos, 0.1)
     # apart, the same two members are fine (free end lines, no junction)
     ok = build_members(skin, chains[:2], infos[:1], 0.1)

@@ -423,7 +423,7 @@ def classify_refusal(cls: str, message: str, stage: str, t: dict) -> tuple:
                        "from 41 points of every member curve hit the skin; full-chord ribs sampled for c in [0.02, 0.98])"
     # refusals that name their own cause must be backed by the independent figure of that cause
     evidence = (("is only", "tall near", "spar_height", HEIGHT_TIGHT, "a spar web"),
-                ("cuts a sharp edge of the skin", "", "wedge", WEDGE_TIGHT, "a full-chord rib section corner"))
+                ("a sharp edge of the skin", "full-chord", "wedge", WEDGE_TIGHT, "a full-chord rib section corner"))
     for a, b, key, bound, what in evidence:
         if a in message and b in message:
             v = math.inf if t.get(key) is None else t[key]

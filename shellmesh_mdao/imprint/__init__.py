@@ -28,6 +28,7 @@ Modules (each imports only the public names of the others; nothing here imports 
 * :mod:`.specs`     the curves to imprint from the layout (:class:`ChainSpec`, :func:`chain_specs`);
 * :mod:`.cut`       cutting the skin along the member planes (:func:`imprint_chains`, :class:`ChainResult`);
 * :mod:`.crossings` where chains must share vertices (member crossings, sharp input edges);
+* :mod:`.checks`    layouts the cut cannot represent, refused from the exact curves before cutting;
 * :mod:`.refine`    chain refinement toward the exact curve and coarsening toward the skin's spacing;
 * :mod:`.improve`   flips and smoothing of the imprinted skin (:func:`improve_skin`);
 * :mod:`.repair`    local repair of the few triangles left below the angle bound (:class:`SkinPatch`);
@@ -40,6 +41,7 @@ from __future__ import annotations
 
 from ..core.polyline import closest_on_polyline
 from .bridges import split_member_bridges
+from .checks import MIN_LOOP_CORNER, check_crossing_collisions, fmt_point, check_loop_corners, loop_corner, sharp_loop_message
 from .crossings import kept_sharp_segments
 from .cut import SNAP_FALLBACK, ChainResult, chain_report, cut_chain, imprint_chains, insert_point
 from .families import skin_families
@@ -52,4 +54,6 @@ from .stage import imprint_mesh
 __all__ = ["ChainSpec", "ChainResult", "SNAP_FALLBACK", "chain_specs", "imprint_chains", "insert_point", "cut_chain",
            "closest_on_polyline", "kept_sharp_segments", "chain_depths", "refine_chains", "coarsen_chains",
            "improve_skin", "split_member_bridges", "skin_families", "chain_report", "imprint_mesh",
-           "Plane", "PlaneSection", "SectionArc", "plane_section", "section_arc"]
+           "Plane", "PlaneSection", "SectionArc", "plane_section", "section_arc",
+           "MIN_LOOP_CORNER", "fmt_point", "loop_corner", "sharp_loop_message", "check_loop_corners",
+           "check_crossing_collisions"]

@@ -138,8 +138,9 @@ def _on_segments(q, a, b, eps):
     return q[np.unique(qi)] if len(qi) else np.zeros((0, 3))
 
 
-def arc_crossings(chains, arcs, eps):
-    """Points where arc i crosses the plane of chain j and lies on arc j (within eps). A pair
+def arc_crossings(chains, arcs, eps, pairs: list | None = None):
+    """Points where arc i crosses the plane of chain j and lies on arc j (within eps), one array
+    per such pair (i, j); ``pairs``, when given, receives the pairs in the same order. A pair
     whose arc i lies, bounding box and all, farther than ``2 eps`` on one side of plane j is
     skipped unread: none of its points is within ``eps`` of the plane nor on its other side
     (the rounding of the plane distances is some 1e-16 of the model, eps 1e-9 of it)."""
@@ -166,4 +167,6 @@ def arc_crossings(chains, arcs, eps):
             on = norm_rows(closest_on_polyline(x, aj.points, aj.closed) - x, axis=1) <= eps
             if on.any():
                 out.append(x[on])
+                if pairs is not None:
+                    pairs.append((i, j))
     return out

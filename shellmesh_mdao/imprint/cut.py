@@ -15,6 +15,7 @@ from .kernels import centroid_d2
 from ..mesh import ShellMesh, bbox_diagonal, cross_rows, norm_rows, reduce_short, unique_edges
 from ..options import ImprintOptions
 from .common import tri_angles_min
+from .checks import check_crossing_collisions, check_loop_corners, fmt_point
 from .crossings import arc_crossings, arc_feature_crossings
 from ..core.section import SectionArc, plane_section, section_arc
 from .specs import ChainSpec
@@ -278,7 +279,7 @@ def cut_chain(P: np.ndarray, T: np.ndarray, comp: np.ndarray, spec: ChainSpec, a
     pos_f, neg_f = reduce_short(fsg > 0, "any"), reduce_short(fsg < 0, "any")
     label = np.where(pos_f & ~neg_f, 1, np.where(neg_f & ~pos_f, -1, 0))
     label[~reduce_short(touch[T2], "any")] = 0
-    chain_v = _chain_from_labels(T2, label, name)
+    chain_v = _chain_from_labels(T2, label, name, P)
     P = P.copy()
     old = chain_v < n0
     mov = chain_v[~old | ~on_plane[np.minimum(chain_v, n0 - 1)]]
@@ -339,10 +340,11 @@ def _unfold_on_arc(P, chain_v, mov, before, arc, passes: int = 3) -> int:
     return moved
 
 
-def _chain_from_labels(T, label, name):
+def _chain_from_labels(T, label, name, P=None):
     """Ordered vertices of the edges separating faces labelled +1 from faces labelled -1: a
     path from its lower end vertex, or a loop from its lowest vertex towards the lower of that
-    vertex's two neighbours (:func:`~shellmesh_mdao.kernels.chain_walk`)."""
+    vertex's two neighbours (:func:`~shellmesh_mdao.kernels.chain_walk`). A chain that branches
+    or falls into pieces is an :class:`ImprintError` whose ``point`` (with ``P`` given) is where."""
     ok = label != 0
     Tl = T[ok].astype(np.int64)
     a, b = Tl, np.roll(Tl, -1, axis=1)
@@ -360,15 +362,23 @@ def _chain_from_labels(T, label, name):
     if not len(ce):
         raise ImprintError(f"{name}: the imprint produced no chain edges; use a smaller --size")
     verts, deg = np.unique(ce, return_counts=True)
-    if (deg > 2).any():
-        raise ImprintError(f"{name}: the imprinted curve branches at vertex {int(verts[deg > 2][0])}; "
-                           "the member is too close to another member or to a sharp edge for this --size "
-                           "(use a smaller --size or move the member)")
-    if (deg == 1).sum() not in (0, 2):
-        raise ImprintError(f"{name}: the imprinted curve is broken into pieces; use a smaller --size")
-    nodes, ptr, _ = chain_walk(ce, int(n))
-    if len(ptr) != 2:
-        raise ImprintError(f"{name}: the imprinted curve is broken into pieces; use a smaller --size")
+    where = None
+    try:
+        if (deg > 2).any():
+            where = int(verts[deg > 2][0])
+            raise ImprintError(f"{name}: the imprinted curve branches at vertex {where}; "
+                               "the member is too close to another member or to a sharp edge for this --size "
+                               "(use a smaller --size or move the member)")
+        if (deg == 1).sum() not in (0, 2):
+            where = int(verts[deg == 1][0])
+            raise ImprintError(f"{name}: the imprinted curve is broken into pieces; use a smaller --size")
+        nodes, ptr, _ = chain_walk(ce, int(n))
+        if len(ptr) != 2:
+            where = int(nodes[ptr[1] - 1])
+            raise ImprintError(f"{name}: the imprinted curve is broken into pieces; use a smaller --size")
+    except ImprintError as e:
+        e.point = None if P is None or where is None else np.asarray(P[where], float)
+        raise
     return nodes
 
 
@@ -505,11 +515,20 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
 
     arcs = [section_arc(surface_points, surface_tris, c.plane, c.bounds, seed=c.seed, seed_tri=c.seed_tri,
                         name=f"{c.member} ({c.side})", section=section_of(c.plane)) for c in chains]
+    # layouts the cut cannot represent, refused here from the exact curves (at any size)
+    check_loop_corners(chains, arcs, eps)
     # 2. crossing points: ends of open arcs, and points where one arc crosses another
-    #    member's plane ON that member's arc (a middle spar crossing a rib); deduplicated
+    #    member's plane ON that member's arc (a middle spar crossing a rib); deduplicated.
+    #    ``owners``: the members each point belongs to (for the refusal naming them)
     cand = [a.points[[0, -1]] for a in arcs if not a.closed]
-    cand += arc_crossings(chains, arcs, eps)
-    cand += arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps)
+    owners = [(c.member,) for c, a in zip(chains, arcs) if not a.closed for _ in range(2)]
+    pairs: list = []
+    cross = arc_crossings(chains, arcs, eps, pairs=pairs)
+    cand += cross
+    owners += [(chains[i].member, chains[j].member) for x, (i, j) in zip(cross, pairs) for _ in range(len(x))]
+    feat = arc_feature_crossings(arcs, surface_points, surface_tris, skin, eps)
+    cand += feat
+    owners += [("a sharp edge of the surface",) for x in feat for _ in range(len(x))]
     P, T, C = skin.points.copy(), skin.faces[:, :3].copy(), skin.component.copy()
     names = list(skin.component_names)
     fixed = np.zeros(len(P), bool)
@@ -534,6 +553,7 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             rep = first[lab]
         uniq = np.unique(rep)
         Xu = X[uniq]
+        own = [tuple(sorted({n for k in np.flatnonzero(rep == r).tolist() for n in owners[k]})) for r in uniq]
         cross_ids = np.empty(len(uniq), np.int64)
         for k in range(len(uniq)):             # a few points per member
             movable = ~(fixed | feat_v)
@@ -548,8 +568,8 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             feat_v = np.concatenate([feat_v, np.zeros(grow, bool)])
             fixed[vid] = True
         if len(np.unique(cross_ids)) != len(cross_ids):
-            raise ImprintError("two member crossing points fell on the same skin vertex: members are closer "
-                               "than the element size; use a smaller --size or move the members apart")
+            check_crossing_collisions(Xu, own, cross_ids, float(np.median(norm_rows(
+                skin.points[skin.faces[:, 0]] - skin.points[skin.faces[:, 1]], axis=1))))
         # an edge joining two crossing vertices (e.g. the upper and lower crossing of a thin
         # section on a coarse skin) would make the plane run along it: split it
         P, T, C, (split_e, new_n) = _split_edges_between(P, T, C, cross_ids, locator)
@@ -558,7 +578,7 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
         grow = len(P) - len(fixed)
         fixed = np.concatenate([fixed, np.zeros(grow, bool)])
         feat_v = np.concatenate([feat_v, np.zeros(grow, bool)])
-    results = []
+    results, failed = [], []
     for ci, (spec, arc) in enumerate(zip(chains, arcs)):
         member_id = names.index(spec.member) if spec.member in names else (names.append(spec.member) or len(names) - 1)
         on = np.zeros(len(P), bool)
@@ -577,15 +597,23 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             endv = cross_ids[i_end]
         used = snap
         try:
-            cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap, end_vertices=endv)
-            clean = _keeps_crossings(cut[3], must, endv)
-        except ImprintError:
-            if snap <= snap_fallback:
-                raise
-            clean = False
-        if not clean and snap > snap_fallback:
-            cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap_fallback, end_vertices=endv)
-            used = snap_fallback
+            try:
+                cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap, end_vertices=endv)
+                clean = _keeps_crossings(cut[3], must, endv)
+            except ImprintError:
+                if snap <= snap_fallback:
+                    raise
+                clean = False
+            if not clean and snap > snap_fallback:
+                cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap_fallback, end_vertices=endv)
+                used = snap_fallback
+            if endv is not None and not _keeps_crossings(cut[3], np.zeros(0, np.int64), endv):
+                _raise_off_ends(spec, cut[0], cut[3], endv)
+        except ImprintError as e:
+            # the skin is as before this chain (a cut returns new arrays): go on with the others,
+            # so that one refusal names every chain that cannot be imprinted
+            failed.append((ci, e))
+            continue
         P, T, C, chain_v, (split_e, new_n) = cut
         grow = len(P) - len(fixed)
         fixed = np.concatenate([fixed, np.zeros(grow, bool)])
@@ -601,8 +629,50 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
         fixed[chain_v] = True
         feat_v[chain_v] = True
         results.append(ChainResult(spec.member, spec.side, chain_v, arc, used))
+    if failed:
+        _raise_failed(failed, chains, arcs, P, T)
     mesh = ShellMesh(P, T, C, names, np.flatnonzero(fixed), np.vstack(fe), np.concatenate(fid))
     return mesh, results
+
+
+def _raise_failed(failed, chains, arcs, P, T) -> None:
+    """One :class:`ImprintError` for every chain the cut could not imprint (``failed``: pairs of
+    chain index and its error): each with the place it broke and the other members whose exact
+    curves pass within two skin edges of it (the members it is too close to), or else the
+    input's sharp edge. A single failure keeps its own message, with those names added."""
+    el = norm_rows(P[T[:, 0]] - P[T[:, 1]], axis=1)
+    h = float(np.median(el)) if len(el) else 0.0
+    parts = []
+    for ci, e in failed:                                  # the few failed chains
+        x = getattr(e, "point", None)
+        msg = str(e)
+        if x is not None:
+            near = sorted({c.member for c, a in zip(chains, arcs) if c.member != chains[ci].member and
+                           norm_rows(closest_on_polyline(x[None], a.points, a.closed) - x[None], axis=1)[0]
+                           <= 2.0 * h})
+            who = ("; within two skin edges of " + ", ".join(f"'{n}'" for n in near)) if near else \
+                "; no other member within two skin edges (a sharp or thin edge of the skin there)"
+            msg = f"{msg} [near {fmt_point(x)}{who}]"
+        parts.append(msg)
+    if len(parts) == 1:
+        raise ImprintError(parts[0])
+    raise ImprintError(f"{len(parts)} member curves could not be imprinted at this --size: " + " | ".join(parts))
+
+
+def _raise_off_ends(spec, P, chain_v, end_vertices) -> None:
+    """An open chain that does not run between its two end vertices: the working skin's section
+    through the member's seed left the member's own skin side (a skin face there spans from one
+    side of the wing to the other, where the wing is thinner than the skin's edges) and came
+    back along the other side. The chain would fold the skin; refuse it, naming the member, its
+    ends and where the section left them."""
+    ends = [int(v) for v in end_vertices]
+    off = [int(v) for v in (chain_v[0], chain_v[-1]) if int(v) not in ends]
+    far = off[0] if off else int(chain_v[len(chain_v) // 2])
+    raise ImprintError(f"{spec.member} ({spec.side}): its curve on the skin does not run between its ends "
+                       f"{fmt_point(P[ends[0]])} and {fmt_point(P[ends[1]])}: it leaves that skin side near "
+                       f"{fmt_point(P[far])} (a skin face there spans both sides of the wing: the member lies within "
+                       "about an element of the end of the skin or of a thin edge); move the member away from that "
+                       "end or edge in the layout (by a few element sizes), or use a smaller --size")
 
 
 def _keeps_crossings(chain_v, must, end_vertices) -> bool:

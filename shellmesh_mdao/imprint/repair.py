@@ -599,7 +599,9 @@ class SkinPatch:
 
     def export(self):
         """Compacted ``(P, T, C, feature_edges, feature_ids, chains, old_to_new)``: dead faces
-        dropped, unreferenced vertices removed (old_to_new -1), surviving order kept."""
+        dropped, unreferenced vertices removed (old_to_new -1, and dropped from the chains, as a
+        collapse drops the vertex it removes: a chain never lists a vertex that is not in the
+        mesh), surviving order kept."""
         alive = np.flatnonzero(self.alive[:self.m])
         T = self.T[alive]
         used = np.zeros(self.n, bool)
@@ -612,4 +614,6 @@ class SkinPatch:
         keys = np.concatenate([self.fkeys[base], np.array([k for k, _ in ov], np.int64)])
         ids = np.concatenate([self.fids[base], np.array([i for _, i in ov], np.int64)]).astype(np.int32)
         fe = remap[np.stack([keys // _KEY, keys % _KEY], 1)]
-        return (self.P[:self.n][used], remap[T], self.C[alive], fe, ids, [remap[c] for c in self.chains], remap)
+        chains = [remap[c] for c in self.chains]
+        chains = [c[c >= 0] for c in chains]
+        return (self.P[:self.n][used], remap[T], self.C[alive], fe, ids, chains, remap)

@@ -49,7 +49,8 @@ messages."""
 from __future__ import annotations
 
 from ..layout import explicit_plane      # (the layout's function; members.explicit_plane as before)
-from .build import MIN_LOOP_CORNER, build_members, member_statistics
+from ..imprint import MIN_LOOP_CORNER
+from .build import build_members, member_statistics
 from .info import MemberInfo, member_infos
 from .meshing import DEFAULT_MIN_ANGLE, NARROW_STRIP, STRIP_MIN_ANGLE, coons_patch, triangulate_planar
 

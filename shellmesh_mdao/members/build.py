@@ -8,6 +8,7 @@ import numpy as np
 from ..core.polygon import frame_from_normal, interior_samples, point_in_polygon, to2d
 from ..errors import ImprintError, LayoutError, SizeError
 from ..families import is_member, is_piece_of, segment_name
+from ..imprint import MIN_LOOP_CORNER, fmt_point, loop_corner, sharp_loop_message
 from ..mesh import ShellMesh, norm_rows
 from .info import MemberInfo
 from .junctions import (MemberChains, chain_edge_len, classify_junctions, end_spacing, exact_junction_vertices,
@@ -15,12 +16,7 @@ from .junctions import (MemberChains, chain_edge_len, classify_junctions, end_sp
 from .meshing import DEFAULT_MIN_ANGLE, connected_pieces, mesh_coons, mesh_panels, mesh_planar_region
 from .spacing import relax_chain_spacing, split_thin_chain_edges
 
-__all__ = ["MIN_LOOP_CORNER", "build_members", "member_statistics"]
-
-
-#: a closed (full-chord) member's outline may not have a corner sharper than this: a quad in
-#: a corner of angle a has a scaled Jacobian of at most sin(a), and the pipeline guarantees > 0.2
-MIN_LOOP_CORNER = float(np.degrees(np.arcsin(0.2)))
+__all__ = ["build_members", "member_statistics"]
 
 
 def _line_params(L: float, size: float, h0: float | None = None, h1: float | None = None) -> np.ndarray:
@@ -46,27 +42,21 @@ def _line_params(L: float, size: float, h0: float | None = None, h1: float | Non
 
 
 def _check_loop_corners(mems, P) -> None:
-    """Refuse a closed member (full-chord rib) whose outline has a corner sharper than
-    :data:`MIN_LOOP_CORNER`: where the rib plane cuts a sharp leading or trailing edge (a
-    wedge of the skin), every quad at that corner has a scaled Jacobian of at most
-    sin(corner), below the pipeline's guarantee, whatever the element size."""
+    """Refuse every closed member (full-chord rib) whose outline has a corner sharper than
+    :data:`~shellmesh_mdao.imprint.MIN_LOOP_CORNER`: where the rib plane cuts a sharp leading or
+    trailing edge (a wedge of the skin), every quad at that corner has a scaled Jacobian of at
+    most sin(corner), below the pipeline's guarantee, whatever the element size. The imprint
+    refuses the loops whose exact section has such a corner; this is the same test on the
+    chain outline the member is meshed on. One error names every offender."""
+    bad = []
     for m in mems:
         if m.loop is None or len(m.loop) < 3:
             continue
-        L = P[m.loop]
-        u, v = np.roll(L, 1, axis=0) - L, np.roll(L, -1, axis=0) - L
-        cosv = np.einsum("ij,ij->i", u, v) / np.maximum(norm_rows(u, axis=1) * norm_rows(v, axis=1),
-                                                        1e-300)
-        ang = np.degrees(np.arccos(np.clip(cosv, -1.0, 1.0)))
-        k = int(np.argmin(ang))
-        if ang[k] < MIN_LOOP_CORNER:
-            p = ", ".join(f"{x:.6g}" for x in L[k])
-            raise LayoutError(
-                f"member '{m.name}' cuts a sharp edge of the skin: its outline has a {ang[k]:.1f} deg corner at "
-                f"[{p}] (the upper and lower skin meet there at that angle), and any quad in that corner has a "
-                f"scaled Jacobian of at most sin({ang[k]:.1f} deg) = {np.sin(np.radians(ang[k])):.3f}, below the "
-                f"0.2 guarantee at any element size; end the rib on spars (with two or more spars every rib "
-                f"runs between them) or round that edge of the surface")
+        a, k = loop_corner(P[m.loop])
+        if a < MIN_LOOP_CORNER:
+            bad.append((m.name, a, P[m.loop[k]]))
+    if bad:
+        raise LayoutError(sharp_loop_message(bad))
 
 
 def _line_intervals(poly: np.ndarray, q: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -86,11 +76,13 @@ def _line_intervals(poly: np.ndarray, q: np.ndarray, d: np.ndarray) -> np.ndarra
 
 def _check_member_pairs(mems, polys, P, joined: set, eps: float, coplanar: bool = True, crossing: bool = True):
     """Coplanar members that overlap (``coplanar``) and members that cross without meeting
-    on the skin (``crossing``) are layout errors naming both. ``polys``: each member's
-    outline (node indices, implicitly closed)."""
+    on the skin (``crossing``) are layout errors naming both; one error names every such pair
+    (the overlaps, or else the crossings). ``polys``: each member's outline (node indices,
+    implicitly closed)."""
     planar = [k for k, m in enumerate(mems) if m.info.is_planar]
     if len(planar) < 2:
         return
+    overlap, cross = [], []
     lo = np.stack([P[polys[k]].min(0) for k in planar]) - eps
     hi = np.stack([P[polys[k]].max(0) for k in planar]) + eps
     ov = (lo[:, None, :] <= hi[None, :, :]).all(2) & (lo[None, :, :] <= hi[:, None, :]).all(2)
@@ -110,8 +102,7 @@ def _check_member_pairs(mems, polys, P, joined: set, eps: float, coplanar: bool 
             sj = np.vstack([pj2, 0.5 * (pj2 + np.roll(pj2, -1, 0)), interior_samples(pj2)])
             si = np.vstack([pi2, 0.5 * (pi2 + np.roll(pi2, -1, 0)), interior_samples(pi2)])
             if point_in_polygon(sj, pi2, tol).any() or point_in_polygon(si, pj2, tol).any():
-                raise LayoutError(f"members '{mi.name}' and '{mj.name}' lie in the same plane and overlap; remove "
-                                  "one of them or move it so their areas do not overlap")
+                overlap.append(f"'{mi.name}' and '{mj.name}'")
             continue
         if not crossing or (i, j) in joined:
             continue
@@ -129,9 +120,17 @@ def _check_member_pairs(mems, polys, P, joined: set, eps: float, coplanar: bool 
             continue
         over = np.minimum(Ii[:, None, 1], Ij[None, :, 1]) - np.maximum(Ii[:, None, 0], Ij[None, :, 0])
         if (over > 1e3 * eps).any():
-            raise LayoutError(f"members '{mi.name}' and '{mj.name}' cross each other inside the skin but do not "
-                              "meet on it (their skin curves share no crossing point): move one so they do not "
-                              "cross, or extend both so they meet on both skin sides")
+            k = np.unravel_index(int(np.argmax(over)), over.shape)
+            s0 = 0.5 * (max(Ii[k[0], 0], Ij[k[1], 0]) + min(Ii[k[0], 1], Ij[k[1], 1]))
+            x = q3 + s0 * dl                         # both intervals are parameters along dl from q3
+            cross.append(f"'{mi.name}' and '{mj.name}' (near {fmt_point(x)})")
+    if overlap:
+        raise LayoutError(f"members {'; '.join(overlap)} lie in the same plane and overlap; remove one of each pair "
+                          "or move it so their areas do not overlap")
+    if cross:
+        raise LayoutError(f"members {'; '.join(cross)} cross each other inside the skin but do not meet on it "
+                          "(their skin curves share no crossing point): move one of each pair so they do not "
+                          "cross, or extend both so they meet on both skin sides")
 
 
 # ============================================================================ main entry

@@ -12,6 +12,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from ..core.polyline import arc_param, sub_polyline
 from ..errors import ImprintError, LayoutError
+from ..imprint import fmt_point
 from ..mesh import ShellMesh, norm_rows
 from .info import MemberInfo, fit_plane
 
@@ -119,27 +120,36 @@ def _member_feature_graph(skin: ShellMesh, name: str):
 def _complete_chain(skin: ShellMesh, verts: np.ndarray, closed: bool, name: str, side: str) -> np.ndarray:
     """Make every consecutive pair of chain vertices a mesh edge: a chain edge split later by
     another member's cut (a middle spar crossing a rib) gets its split nodes back, found
-    along the member's feature edges."""
+    along the member's feature edges (the shortest path of at most 16 of them)."""
     v = np.asarray(verts, np.int64)
     if len(v) < 2:
-        raise ImprintError(f"member '{name}': its {side} chain has {len(v)} vertex; re-run the imprint")
+        raise ImprintError(f"member '{name}': its {side} chain has {len(v)} vertex; the member is shorter than one "
+                           "element there: move it or use a smaller --size")
+    lost = v[(v < 0) | (v >= skin.n_points)]
+    if len(lost):
+        raise ImprintError(f"member '{name}': its {side} chain lists {len(lost)} vertex id(s) that are not skin "
+                           f"vertices ({lost[:4].tolist()}): the imprint lost track of them; please report it with "
+                           "the layout and --size")
     pairs = np.stack([v, np.roll(v, -1)], 1) if closed else np.stack([v[:-1], v[1:]], 1)
     ok = skin.topology().edge_ids(pairs) >= 0
     if ok.all():
         return v
     g = _member_feature_graph(skin, name)
     out = [v[:1]]
-    for i, (a, b) in enumerate(pairs):          # loop over the few missing pairs' neighbours
+    for i, (a, b) in enumerate(pairs.tolist()):  # loop over the few missing pairs' neighbours
         if ok[i]:
             out.append(np.asarray([b], np.int64))
             continue
-        dist, pred = dijkstra(g, directed=False, indices=int(a), unweighted=True, limit=16,
+        dist, pred = dijkstra(g, directed=False, indices=a, unweighted=True, limit=16,
                               return_predecessors=True)
         if not np.isfinite(dist[b]):
+            where = fmt_point(0.5 * (skin.points[a] + skin.points[b]))
             raise ImprintError(f"member '{name}': its {side} chain is broken between skin vertices {a} and {b} "
-                               "(no mesh edge joins them); imprint this member again, or use a smaller --size")
-        path = [int(b)]
-        while path[-1] != a:
+                               f"near {where} (no mesh edge joins them); another member or a sharp edge of the "
+                               "skin is closer to it there than the element size: move the member in the layout, "
+                               "or use a smaller --size")
+        path = [b]
+        for _ in range(int(dist[b])):           # dist[b] steps lead back to a
             path.append(int(pred[path[-1]]))
         out.append(np.asarray(path[::-1][1:], np.int64))
     w = np.concatenate(out)
@@ -203,7 +213,9 @@ def _join_pieces(pieces: list, name: str, side: str) -> np.ndarray:
             out = np.concatenate([out, p[::-1][1:]])
         else:
             raise ImprintError(f"member '{name}': pieces {k - 1} and {k} of its {side} chain do not meet at a "
-                               "skin vertex; imprint the member again (its polyline points must lie on the skin)")
+                               "skin vertex; move its polyline points so that each projects onto the skin (a "
+                               "point whose projection misses the skin or lands on another part of it splits the "
+                               "chain), or use a smaller --size")
     return out
 
 
@@ -371,9 +383,10 @@ def exact_junction_vertices(junctions, mems, P, diag, eps):
                 x = _exact_crossing(P, v, mj, mi.info)
             if x is None or np.linalg.norm(x - P[v]) > 1e-3 * diag:
                 if off > eps:
-                    raise ImprintError(f"members '{mi.name}' and '{mj.name}' share skin vertex {v} off the "
-                                       "intersection of their planes; imprint them again (their crossing was "
-                                       "not inserted)")
+                    raise ImprintError(f"members '{mi.name}' and '{mj.name}' share skin vertex {v} at "
+                                       f"{fmt_point(P[v])}, off the intersection "
+                                       "of their planes (they pass closer than an element there without crossing): "
+                                       "move one of them in the layout, or use a smaller --size")
                 continue
             P[v] = x
 

@@ -324,7 +324,8 @@ def split_thin_chain_edges(P, F, C, FE, FID, mems, size, ratio: float = 1.5, max
         if ((hi - lo) != 2).any():
             bad = int(np.flatnonzero((hi - lo) != 2)[0])
             raise ImprintError(f"member '{mems[cm[bad]].name}': chain edge {a_[bad]}-{b_[bad]} is not an edge between "
-                               "two skin triangles; imprint the member again")
+                               "two skin triangles (another member's chain or a sharp edge of the skin runs along "
+                               "it): move the member in the layout, or use a smaller --size")
         f0, f1 = o[lo] // 3, o[lo + 1] // 3
         # no fan triangle below min_skin_angle, nor below the smallest angle of the face it replaces
         floor_ang = np.minimum(min_skin_angle, np.minimum(tri_min_angles(P, F[f0]), tri_min_angles(P, F[f1])))
