@@ -105,7 +105,7 @@ def _closest_on_triangles(P, A, B, C):
 
 def closest_on_triangles(p, a, b, c):
     """Closest point of triangle ``(a[i], b[i], c[i])`` to ``p[i]`` (all (k, 3)): the same bits
-    as the numpy version of :func:`shellmesh_mdao.project.closest_point_on_triangles` (Ericson's
+    as the numpy version of :func:`shellmesh_mdao.core.locator.closest_point_on_triangles` (Ericson's
     regions in the same order, numpy's sums of three products, the degenerate fallback onto
     the nearest edge), one pass per point, except where that version returned NaN: an edge of
     zero length is skipped as a region, so a triangle with a repeated corner gets the closest
@@ -280,7 +280,7 @@ class TriangleBVH:
     tree's layout, the order of the queries or the number of threads answering them.
 
     ``points`` (n, 3) float64, ``triangles`` (t, 3) int64 with indices in range (checked by
-    the caller, :class:`shellmesh_mdao.project.SurfaceLocator`)."""
+    the caller, :class:`shellmesh_mdao.core.locator.SurfaceLocator`)."""
 
     LEAF = 8
     #: fewest queries a thread of :meth:`closest` takes: two threads already pay from about

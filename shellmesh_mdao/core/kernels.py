@@ -328,7 +328,7 @@ def chain_walk(edges, n):
     lowest edge; a path runs from its lower end node (from the end of its lower edge where
     both ends are one node), a loop from its lowest node towards the lower of that node's two
     neighbours (the walks of scipy's ``depth_first_order`` on the graph with the break nodes
-    split, which :func:`~shellmesh_mdao.smooth.polylines_from_edges` used)."""
+    split, which :func:`~shellmesh_mdao.core.supports.polylines_from_edges` used)."""
     e = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
     n = int(n)
     check_index("edges", e.ravel(), n)
@@ -461,7 +461,7 @@ def edge_table(F, n):
     ``lo * n + hi``: ``(he_edge (3m,), h0, h1, valence, E (e, 2), keys)``, half-edge ``3 f + k``
     running from ``F[f, k]`` to ``F[f, k + 1]``; ``h0`` the first half-edge of each edge (in
     half-edge order), ``h1`` the second where the edge has exactly two, else -1. The arrays of
-    ``remesh._Topo``'s whole-array construction (stable sort of the keys, run starts)."""
+    ``remesh.common.EdgeTable``'s whole-array construction (stable sort of the keys, run starts)."""
     F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
     check_index("F", F, int(n))
     return _edge_table(F, int(n))
@@ -837,7 +837,7 @@ def arc_order(lu, lv, nn, start):
 @njit(cache=True, nogil=True, inline="always")
 def on_segment_ab(q0, q1, q2, a, ab, s):
     """Closest point of segment ``s`` (``a[s] + t ab[s]``) to ``q``: ``(t, x0, x1, x2, distance)``
-    in the arithmetic of ``imprint._pick_segments`` (einsum's dot products, ``np.clip``, a t
+    in the arithmetic of ``core.polyline.pick_segments`` (einsum's dot products, ``np.clip``, a t
     of 0 on a zero-length segment, row norms)."""
     a0, a1, a2 = a[s, 0], a[s, 1], a[s, 2]
     e0, e1, e2 = ab[s, 0], ab[s, 1], ab[s, 2]
@@ -877,7 +877,7 @@ def segments_scan(q, lo, hi, a, ab):
     """The closest point to each query ``q[i]`` on the segments ``a[s] + t ab[s]``,
     ``lo[i] <= s < hi[i]`` (a non-empty range), scanning them all: ``(points, distances,
     segments, t)``, the nearest segment and the lowest among equally near ones, with
-    numpy's arithmetic of ``imprint._pick_segments`` (einsum's dot products, ``np.clip``,
+    numpy's arithmetic of ``core.polyline.pick_segments`` (einsum's dot products, ``np.clip``,
     row norms), so the same bits as that pick over any candidate set holding the nearest."""
     q = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 3)
     a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
@@ -931,7 +931,7 @@ def closest_on_curves(q, cid, start, stop, a, ab, L):
     are ``a[s] + t ab[s]``, ``0 <= t <= 1``, of length ``L[s]``, for ``s`` in
     ``start[cid[i]] .. stop[cid[i]] - 1``. Returns ``(points (k, 3), distances (k,), segments
     (k,))``: over every segment of the polyline, the nearest, then the lowest segment index;
-    the same bits as the numpy formulas of :func:`~shellmesh_mdao.smooth._pick_nearest` over
+    the same bits as the numpy formulas of :func:`~shellmesh_mdao.core.supports._pick_nearest` over
     any set of candidates that holds the nearest segments. ``L`` must be the segments' lengths
     (``norm(ab)``): a segment whose start is farther than the best distance so far plus its
     length is skipped."""

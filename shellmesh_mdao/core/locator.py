@@ -18,7 +18,7 @@ def closest_point_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: n
     region test: the vertices, then the edges ab, ac, bc, then the interior). All inputs
     (k, 3) float64 (or broadcastable); returns (k, 3). Degenerate triangles (zero area) go
     to the nearest of their three edges. A compiled loop
-    (:func:`~shellmesh_mdao.kernels.closest_on_triangles`)."""
+    (:func:`~shellmesh_mdao.core.bvh.closest_on_triangles`)."""
     from .bvh import closest_on_triangles          # numba: imported on first use
     return closest_on_triangles(p, a, b, c)
 
@@ -110,14 +110,14 @@ class SurfaceLocator:
     # ------------------------------------------------------------------ trees
     def _tree(self):
         """The compiled bounding-volume hierarchy of the triangles
-        (:class:`~shellmesh_mdao.kernels.TriangleBVH`), built on the first query."""
+        (:class:`~shellmesh_mdao.core.bvh.TriangleBVH`), built on the first query."""
         if self._bvh is None:
             from .bvh import TriangleBVH          # numba: imported on first use
             self._bvh = TriangleBVH(self._local, self.triangles)
         return self._bvh
 
     def compiled_tree(self):
-        """``(bvh, center)``: the :class:`~shellmesh_mdao.kernels.TriangleBVH` that answers
+        """``(bvh, center)``: the :class:`~shellmesh_mdao.core.bvh.TriangleBVH` that answers
         :meth:`closest` and the point its triangles were shifted by (queries are shifted the
         same way), for compiled loops that query it themselves."""
         return self._tree(), self._center

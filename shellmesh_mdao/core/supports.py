@@ -130,7 +130,7 @@ class CurveSet:
     curve at their plain distance; candidates of other curves are dropped, and a query whose
     nearest midpoint is not on its own curve (one farther than ``sep`` from it) is answered by
     its curve alone. Queries on curves of at most :data:`SCAN_SEGMENTS` segments skip the
-    tree: a compiled loop (:func:`~shellmesh_mdao.kernels.closest_on_curves`) scans all the
+    tree: a compiled loop (:func:`~shellmesh_mdao.core.kernels.closest_on_curves`) scans all the
     segments of the query's curve, with the same rule and the same arithmetic."""
 
     def __init__(self, curves):
@@ -213,7 +213,7 @@ class _Surface:
         normal has a dot product > ``min_dot`` with it. Returns ``(points, ok, tri)``; ``ok``
         is False where no compatible triangle was found nearby (the plain closest point is
         returned there); ``tri`` the plain closest point's triangle, a ``hint`` (see
-        :meth:`~shellmesh_mdao.project.SurfaceLocator.closest`) for the next query of a point
+        :meth:`~shellmesh_mdao.core.locator.SurfaceLocator.closest`) for the next query of a point
         that moves on from there."""
         cl, ti, _ = self.loc.closest(q, hint=hint)
         if nrm is None:
@@ -253,7 +253,7 @@ class Supports:
     ``kind``        (n,) int8: FIXED, CURVE, PLANE or SURFACE per vertex.
     ``ref``         (n,) int64: index into ``curves`` / ``planes`` / ``surfaces`` for that
                     kind (-1 for FIXED).
-    ``surfaces``    list of :class:`~shellmesh_mdao.project.SurfaceLocator` (the ORIGINAL
+    ``surfaces``    list of :class:`~shellmesh_mdao.core.locator.SurfaceLocator` (the ORIGINAL
                     input surfaces; ``surfaces[0]`` is the skin).
     ``planes``      (p, 2, 3): point and unit normal of each member plane.
     ``curves``      list of :class:`Curve`.
@@ -403,7 +403,7 @@ def polylines_from_edges(points, edges) -> list:
     Returns a list of ``(node_indices, closed)``; point coordinates are ``points[node_indices]``.
     Deterministic: chains are ordered by their smallest edge index and walk from the
     lower-index end (closed loops from their lowest node, towards its lower neighbour); one
-    compiled walk (:func:`~shellmesh_mdao.kernels.chain_walk`)."""
+    compiled walk (:func:`~shellmesh_mdao.core.kernels.chain_walk`)."""
     e = np.asarray(edges, np.int64).reshape(-1, 2)
     e = unique_edges(e[:, 0], e[:, 1])
     e = e[e[:, 0] != e[:, 1]]
@@ -635,7 +635,7 @@ SECTION_CACHE_SIZE = 256
 
 
 def section_polylines(skin, point, normal) -> list:
-    """The section of the input skin (a :class:`~shellmesh_mdao.project.SurfaceLocator`) with
+    """The section of the input skin (a :class:`~shellmesh_mdao.core.locator.SurfaceLocator`) with
     the plane through ``point`` with ``normal``, as ``(nodes, closed)`` polylines (read-only
     arrays). Computed once per locator and plane: the split, merge and quad stages ask for the
     same members' sections (the input skin never changes during a run). At most
@@ -661,7 +661,7 @@ def section_polylines(skin, point, normal) -> list:
 def pipeline_supports(mesh: ShellMesh, skin, infos) -> Supports:
     """Supports of the conforming skin + members mesh of the pipeline.
 
-    ``skin``: :class:`~shellmesh_mdao.project.SurfaceLocator` of the ORIGINAL input skin;
+    ``skin``: :class:`~shellmesh_mdao.core.locator.SurfaceLocator` of the ORIGINAL input skin;
     ``infos``: the layout's :class:`~shellmesh_mdao.members.MemberInfo` list. Member faces
     (components named ``<member>`` or ``<member>/seg_<j>``) of a planar member move in its
     plane; every other face lies on the input skin. Feature edges of member ``k`` (its chains,

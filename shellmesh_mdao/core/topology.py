@@ -10,7 +10,7 @@ __all__ = ["faces_of", "face_rings", "fixed_edge_mask"]
 
 def faces_of(ptr, vf, verts, m):
     """Sorted ids of the faces incident to ``verts`` (CSR ``ptr``/``vf`` of ``m`` faces; a
-    compiled pass, :func:`~shellmesh_mdao.kernels.faces_at`)."""
+    compiled pass, :func:`~shellmesh_mdao.core.kernels.faces_at`)."""
     return faces_at(ptr, vf, verts, m)
 
 

@@ -4,7 +4,7 @@ Stage order: load -> layout -> project -> **imprint** -> members -> split -> mer
 
 For every planar member (rib, spar, and each segment of an explicit member) the exact
 curve ``plane ∩ input surface`` between the member's bounds is traced on the INPUT
-triangulation (:mod:`.section`): a plane meets each input triangle in an exact segment,
+triangulation (:mod:`~shellmesh_mdao.core.section`): a plane meets each input triangle in an exact segment,
 so the curve is exact. The working skin (the remeshed triangulation, whose vertices lie
 on the input surface) is then cut by the same plane inside the same bounds:
 
@@ -22,9 +22,10 @@ on the input surface) is then cut by the same plane inside the same bounds:
 
 All per-face work is vectorised; Python loops run over members and crossing points only.
 
-Modules (each imports only the public names of the others; nothing here imports a later stage):
+Modules (each imports only the public names of the others; nothing here imports a later stage; the exact plane
+sections of the input triangulation, :class:`Plane` and :class:`SectionArc`, are the shared
+:mod:`shellmesh_mdao.core.section`):
 
-* :mod:`.section`   exact plane sections of the input triangulation (:class:`Plane`, :class:`SectionArc`);
 * :mod:`.specs`     the curves to imprint from the layout (:class:`ChainSpec`, :func:`chain_specs`);
 * :mod:`.cut`       cutting the skin along the member planes (:func:`imprint_chains`, :class:`ChainResult`);
 * :mod:`.crossings` where chains must share vertices (member crossings, sharp input edges);

@@ -39,7 +39,7 @@ def _segment_hits(q, a, b, eps):
     """Every (point, segment) pair with point ``q[i]`` within ``eps`` of segment ``a[j]-b[j]``:
     ``(i, j, t)`` with ``t`` the parameter of the closest point along the segment, in the order
     of ``i``, then ``j``. Up to :data:`SCAN_WORK` pairs a compiled loop scans them all
-    (:func:`~shellmesh_mdao.kernels.segments_within`); above, a KD-tree of the segment
+    (:func:`~shellmesh_mdao.imprint.kernels.segments_within`); above, a KD-tree of the segment
     midpoints lists the candidates (the same pairs: a segment within ``eps`` has its midpoint
     within half its length plus ``eps``)."""
     q = np.atleast_2d(q)

@@ -343,7 +343,7 @@ def _unfold_on_arc(P, chain_v, mov, before, arc, passes: int = 3) -> int:
 def _chain_from_labels(T, label, name, P=None):
     """Ordered vertices of the edges separating faces labelled +1 from faces labelled -1: a
     path from its lower end vertex, or a loop from its lowest vertex towards the lower of that
-    vertex's two neighbours (:func:`~shellmesh_mdao.kernels.chain_walk`). A chain that branches
+    vertex's two neighbours (:func:`~shellmesh_mdao.core.kernels.chain_walk`). A chain that branches
     or falls into pieces is an :class:`ImprintError` whose ``point`` (with ``P`` given) is where."""
     ok = label != 0
     Tl = T[ok].astype(np.int64)
@@ -493,7 +493,7 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
 
     Returns ``(mesh, results)``: the imprinted skin (feature edges of each chain tagged with
     the member's component id, chain vertices fixed) and one :class:`ChainResult` per chain.
-    ``locator``: a :class:`~shellmesh_mdao.project.SurfaceLocator` of the input surface (built
+    ``locator``: a :class:`~shellmesh_mdao.core.locator.SurfaceLocator` of the input surface (built
     when not given) used to put new skin vertices onto it.
     """
     if locator is None:

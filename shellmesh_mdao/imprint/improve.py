@@ -20,7 +20,7 @@ def _closest_on_arcs(q: np.ndarray, cid: np.ndarray, arcs, params: bool = False)
     """Closest point of each query ``q[i]`` on the arc ``arcs[cid[i]]``: the same points, bit
     for bit, as :func:`closest_on_polyline` arc by arc, in one query. Up to
     :data:`SCAN_WORK` query-segment pairs, one compiled loop scans every segment of each
-    query's arc (:func:`~shellmesh_mdao.kernels.segments_scan`). Above, the segment midpoints
+    query's arc (:func:`~shellmesh_mdao.core.kernels.segments_scan`). Above, the segment midpoints
     of all arcs go in one KD-tree with the arc's index times a separation far larger than
     the model as a fourth coordinate, so a query meets only its own arc's segments (at their
     plain distance); its candidates lie within the nearest midpoint's distance plus half its

@@ -1,5 +1,5 @@
-"""Compiled kernels of the imprint stage: section arcs' link walks, segment scans, the skin flips' and the
-smoothing stars' tests, nearest triangle centroids.
+"""Compiled kernels of the imprint stage: (point, segment) pairs within a distance, the skin flips' and the
+smoothing stars' tests and independent sets, corner cosines, nearest triangle centroids.
 """
 from __future__ import annotations
 
@@ -181,7 +181,7 @@ def skin_flips(E, kptr, h0, h1, cnt, locked, T, P, cmax, active=None):
     triangles (r, s, q) and (s, r, p) are within it of the pair's mean unit normal. Returns
     ``(pqrs (k, 4), faces (k, 2), orient, cos (4, k, 3))`` in edge order, ``cos`` the
     :func:`corner_cosines` of the triangles T[f0], T[f1] (as stored) and the two new ones, for
-    numpy's ``arccos``. The bits of the numpy formulas of ``imprint._flip_round``."""
+    numpy's ``arccos``. The bits of the numpy formulas of ``imprint.improve.flip_round``."""
     E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
     kptr, h0, h1, cnt = (np.ascontiguousarray(x, dtype=np.int64) for x in (kptr, h0, h1, cnt))
     T = np.ascontiguousarray(T, dtype=np.int64).reshape(-1, 3)
@@ -269,7 +269,7 @@ def star_independent(order, ptr, star, ntri: int, rounds: int = 8):
     triangle ids below ``ntri``) and none of those triangles was taken in an earlier round;
     the vertices taken take their triangles, the others go on to the next round in their
     order. Returns the vertices taken, round by round, each round in ``order``'s order (the
-    numpy rounds of ``imprint._smooth_round``, the same list)."""
+    numpy rounds of ``imprint.improve._smooth_round``, the same list)."""
     order = np.ascontiguousarray(order, dtype=np.int64).reshape(-1)
     ptr = np.ascontiguousarray(ptr, dtype=np.int64).reshape(-1)
     star = np.ascontiguousarray(star, dtype=np.int64).reshape(-1)
@@ -285,7 +285,7 @@ def star_moves(rows, tris, T, P, new, nrm):
     each of its triangles ``tris[i]`` (of ``T`` (m, 3)): the :func:`corner_cosines` of the
     triangle with that vertex moved and before (for numpy's ``arccos``), and whether the moved
     triangle's normal (cross_rows of its sides) turns against ``nrm[tris[i]]`` (einsum's dot at
-    most 0). The bits of the numpy formulas of ``imprint._smooth_round``."""
+    most 0). The bits of the numpy formulas of ``imprint.improve._smooth_round``."""
     rows = np.ascontiguousarray(rows, dtype=np.int64).reshape(-1)
     tris = np.ascontiguousarray(tris, dtype=np.int64).reshape(-1)
     T = np.ascontiguousarray(T, dtype=np.int64).reshape(-1, 3)

@@ -21,7 +21,7 @@ between the two triangles above ``max_dihedral``; also triangles traversing the 
 edge in the same direction (inconsistent orientation), since the quad could not be
 oriented like both.  Edges with positive weight are left out as well (they are 0 in
 every optimum).  Before the MIP, edges that belong to some optimal matching are fixed
-by an exact reduction (:func:`_safe_reduction`), which leaves HiGHS a much smaller
+by an exact reduction (:func:`~.triangles._safe_reduction`), which leaves HiGHS a much smaller
 problem on real meshes.
 
 With ``valence_weight`` > 0 (beyond the paper) the objective also counts, per interior

@@ -66,7 +66,7 @@ def _safe_rounds(f0, f1, g, rank, n_faces, max_rounds):
 
 
 def safe_matching_rounds(f0, f1, w, n_faces, max_rounds: int = 100):
-    """The merge's exact reduction (:func:`shellmesh_mdao.merge._safe_reduction`) in compiled
+    """The merge's exact reduction (:func:`shellmesh_mdao.merge.triangles._safe_reduction`) in compiled
     rounds: edges ``(f0[i], f1[i])`` between triangles (``f0 != f1``, in [0, n_faces)) with
     weights ``w`` (gain ``-w``), ranked by weight then index. Each round, an edge whose gain is
     at least the best other gain at its first triangle plus that at its second (0 where there

@@ -186,7 +186,7 @@ def _safe_reduction(f0, f1, w, n_faces, max_rounds: int = 100):
     With gains ``g = -w > 0``: if ``g(uv) >= best other gain at u + best other gain at v``
     then replacing, in any optimal matching, the edges at u and v by uv loses nothing, so
     uv can be fixed to 1 and u, v removed.  In rounds (compiled:
-    :func:`~shellmesh_mdao.kernels.safe_matching_rounds`); within a round only safe edges
+    :func:`~shellmesh_mdao.merge.kernels.safe_matching_rounds`); within a round only safe edges
     that are the best-ranked safe edge at both their triangles are taken, so they form a
     matching.  Returns ``(taken, remaining)`` boolean masks over the edges."""
     return safe_matching_rounds(f0, f1, w, n_faces, max_rounds)

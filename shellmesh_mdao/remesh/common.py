@@ -112,7 +112,7 @@ class EdgeTable:
 
     def lookup(self, u, v):
         """Edge id of node pairs (u, v), -1 where absent (a compiled scan of the few edges
-        whose lower end is ``min(u, v)``: :func:`~shellmesh_mdao.kernels.edge_lookup`)."""
+        whose lower end is ``min(u, v)``: :func:`~shellmesh_mdao.core.kernels.edge_lookup`)."""
         return edge_lookup(self.E, self.kptr(), np.asarray(u).reshape(-1), np.asarray(v).reshape(-1))
 
     def vertex_neighbors(self):

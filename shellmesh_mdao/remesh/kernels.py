@@ -305,7 +305,7 @@ def _facing_one(q0, q1, q2, kind, vtri, tri_n, n0, n1, n2, cos_facing):
 
 @njit(cache=True, nogil=True, inline="always")
 def _tri_min_deg(A, B, C):
-    """Smallest angle (degrees) of triangle (A, B, C) as ``remesh._min_angle_of`` computes it
+    """Smallest angle (degrees) of triangle (A, B, C) as ``remesh.common.min_angle_of`` computes it
     (the corners at A and B by arctan2, the third what remains of pi; a NaN wins), with the C
     library's atan2 instead of numpy's."""
     s0, c0 = _sin_cos(B[0] - A[0], B[1] - A[1], B[2] - A[2], C[0] - A[0], C[1] - A[1], C[2] - A[2])
@@ -492,7 +492,7 @@ def collapse_directions(E, cand, h0, h1, valence, F, nptr, nbr, kind, isf, chain
     edge (``isf`` per edge) with ``chain_ok`` (its chain keeps enough vertices). With
     ``remove_first`` (vertex ids): those vertices may also go when they are corners (kind 2)
     along a feature edge, and an edge at one of them may only remove it. The numpy tests of
-    ``remesh._collapse_edges`` in one compiled pass (the same masks)."""
+    ``remesh.operations.collapse_edges`` in one compiled pass (the same masks)."""
     i64 = lambda x: np.ascontiguousarray(x, dtype=np.int64)     # noqa: E731
     E = i64(E).reshape(-1, 2)
     F = i64(F).reshape(-1, 3)
@@ -548,7 +548,7 @@ def _collapse_apply(F, fpatch, fe, fe_chain, a, b, n):
             k += 1
     # the feature edges remapped, each row (lo, hi), degenerate rows dropped, then sorted by
     # (lo, hi, chain) with ties in row order (three stable counting passes, last key first)
-    # and one row per pair: remesh._Work.set_features' table, renumbered
+    # and one row per pair: remesh.work.WorkMesh.set_features' table, renumbered
     ne = fe.shape[0]
     lo = np.empty(ne, np.int64)
     hi = np.empty(ne, np.int64)
@@ -592,10 +592,10 @@ def collapse_apply(F, fpatch, fe, fe_chain, a, b, n):
     the triangles ``F`` (m, 3) with patches ``fpatch`` and the feature edges ``fe`` (k, 2) with
     chain ids ``fe_chain``, on ``n`` vertices. Returns ``(F, fpatch, fe, fe_chain, keep)``: the
     faces left (the two at each collapsed edge drop out, the rest keep their order), the
-    feature edges as ``remesh._Work.set_features`` tabulates them (rows (lo, hi) sorted by
+    feature edges as ``remesh.work.WorkMesh.set_features`` tabulates them (rows (lo, hi) sorted by
     (lo, hi, chain), degenerate rows dropped, one row per pair, the lowest chain), both on
     the vertices renumbered without the removed ones, and ``keep`` (n,) the vertices left.
-    The numpy update ``remesh._collapse_edges`` made before it (remap, face filter,
+    The numpy update ``remesh.operations.collapse_edges`` made before it (remap, face filter,
     set_features, renumbering) in one compiled pass (the same arrays)."""
     i64 = lambda x: np.ascontiguousarray(x, dtype=np.int64)     # noqa: E731
     F = i64(F).reshape(-1, 3)
@@ -795,7 +795,7 @@ def flip_candidates(E, kptr, h0, h1, isf, F, fpatch, P, cosmax, kind, vtri, tri_
     sc)``: ``gain`` the valence gain (0 without ``deg``), ``m0``/``m1`` the unit normals of the
     new faces (a, d, c) and (d, b, c), ``sc`` (4, 4, k) the :func:`corner_sin_cos` arguments of
     the triangles (a, b, c), (b, a, d), (a, d, c) and (d, b, c) for numpy's ``arctan2``. The
-    bits of the numpy formulas of ``remesh._flip_round``."""
+    bits of the numpy formulas of ``remesh.operations.flip_round``."""
     E = np.ascontiguousarray(E, dtype=np.int64).reshape(-1, 2)
     kptr, h0, h1, fpatch, kind, vtri = (np.ascontiguousarray(x, dtype=np.int64)
                                         for x in (kptr, h0, h1, fpatch, kind, vtri))
@@ -855,7 +855,7 @@ def move_tests(cur, Fi, fn_old, area_old, moved, newtri, vtri, reg, tri_n, cosma
     it faces against the input at a regular corner (``reg``; input triangle ``newtri`` where
     ``moved``, else ``vtri``, -1 none; ``tri_n`` their normals) or stands across it (no regular
     corner's dot above ``cos_facing``); and the :func:`corner_sin_cos` arguments (4, k) of the
-    faces for numpy's ``arctan2``. The bits of the numpy formulas of ``remesh._accept_moves``."""
+    faces for numpy's ``arctan2``. The bits of the numpy formulas of ``remesh.relax._accept_moves``."""
     Fi = np.ascontiguousarray(Fi, dtype=np.int64).reshape(-1, 3)
     cur, fn_old, tri_n = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (cur, fn_old, tri_n))
     area_old = np.ascontiguousarray(area_old, dtype=np.float64).reshape(-1)

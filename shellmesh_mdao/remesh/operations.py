@@ -261,7 +261,7 @@ def collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, m
     the candidates that win their neighbourhood in a selection sub-round: the sweeps' tests
     (new edges against the local size, normal turn, facing, smallest angle), or with
     ``check_geometry=False`` the facing tests only, both in the compiled selection
-    (:func:`~shellmesh_mdao.kernels.collapse_select`); with ``quality=True`` (the clean-up:
+    (:func:`~shellmesh_mdao.remesh.kernels.collapse_select`); with ``quality=True`` (the clean-up:
     the smallest angle must rise, new edges within max_deviation) in numpy, called back each
     sub-round."""
     if quality and not check_geometry:

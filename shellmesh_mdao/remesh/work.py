@@ -97,7 +97,7 @@ class WorkMesh:
 
     def keep_vertices(self, keep):
         """Drop the per-vertex rows not in ``keep`` (bool); faces and features must already be
-        on the new numbering (:func:`~shellmesh_mdao.kernels.collapse_apply`)."""
+        on the new numbering (:func:`~shellmesh_mdao.remesh.kernels.collapse_apply`)."""
         for name in ("P", "kind", "S", "vchain", "vin", "vtri", "h"):
             setattr(self, name, getattr(self, name)[keep])
         self.touched()

@@ -33,7 +33,7 @@ def tangent_basis(n: np.ndarray):
 # ============================================================================ element checks
 def face_normals(P, faces, is_tri):
     """Unit normals of the elements (:func:`_corner_normals` of their corners, in one compiled
-    pass: :func:`~shellmesh_mdao.kernels.element_normals`)."""
+    pass: :func:`~shellmesh_mdao.smooth.kernels.element_normals`)."""
     return element_normals(P, faces, is_tri)
 
 
@@ -50,7 +50,7 @@ def _corner_normals(c, is_tri):
 def element_min_sj(P, faces, is_tri, nref=None):
     """Per element: min over corners of the scaled Jacobian against the element's own normal
     and (if given) against ``nref``; triangles scaled by 2/sqrt(3) (1 = equilateral). A
-    compiled loop (:func:`~shellmesh_mdao.kernels.min_corner_sj`), the same bits as
+    compiled loop (:func:`~shellmesh_mdao.smooth.kernels.min_corner_sj`), the same bits as
     :func:`_corner_min_sj` on the corners and their :func:`_corner_normals`."""
     return min_corner_sj(P, faces, is_tri, nref, _TRI_SJ)
 
@@ -81,7 +81,7 @@ def oriented_quality(C, is_tri, nref):
     """Per element with corner positions ``C`` (k, 4, 3): the scaled Jacobian (own normal,
     :func:`element_min_sj`), replaced by ``dot - 1`` (in [-2, -1]) where the element's own
     normal points against its reference normal ``nref`` (k, 3) (a flipped element). A compiled
-    loop (:func:`~shellmesh_mdao.kernels.face_quality`), the same bits as
+    loop (:func:`~shellmesh_mdao.smooth.kernels.face_quality`), the same bits as
     ``np.where(d > 0, sj, d - 1)`` with ``nown = _corner_normals(C, is_tri)``,
     ``sj = _corner_min_sj(C, is_tri, nown)`` and ``d = dot_rows(nown, nref)``."""
     return face_quality(C, is_tri, nref, _TRI_SJ)

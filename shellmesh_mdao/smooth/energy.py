@@ -139,11 +139,11 @@ class OrthoTerm:
 
     def gradient(self, x, n):
         """(n, 3) gradient of 1/2 sum w |r|^2 at positions x (a compiled loop,
-        :func:`~shellmesh_mdao.kernels.ortho_gradient`)."""
+        :func:`~shellmesh_mdao.smooth.kernels.ortho_gradient`)."""
         return ortho_gradient(self.a, self.b, self.c, self.n, self.su, self.sv, self.w, x, n)
 
     def terms(self):
-        """The corners as :meth:`~shellmesh_mdao.kernels.ReducedHessian.values` takes them
+        """The corners as :meth:`~shellmesh_mdao.smooth.kernels.ReducedHessian.values` takes them
         (``4 q + k`` the corner ``k`` of quad ``q``): ``(n, su, sv, sqrt(w))``."""
         return self.n, self.su, self.sv, np.sqrt(self.w)
 
@@ -158,7 +158,7 @@ class OrthoTerm:
     def hessian(self, col_start, ncol, tv, k):
         """Hessian J_T^T W J_T in the reduced coordinates: vertex v owns columns
         ``col_start[v] .. col_start[v] + ncol[v] - 1`` with tangent vectors ``tv`` (k, 3).
-        The Jacobian is built by a compiled loop (:func:`~shellmesh_mdao.kernels.ortho_jacobian`)."""
+        The Jacobian is built by a compiled loop (:func:`~shellmesh_mdao.smooth.kernels.ortho_jacobian`)."""
         m = len(self.b)
         if not m or not (np.asarray(ncol) > 0).any():
             return sparse.csr_matrix((k, k))
@@ -235,6 +235,6 @@ class WarpTerm:
         return t
 
     def terms(self):
-        """The quads as :meth:`~shellmesh_mdao.kernels.ReducedHessian.values` takes them:
+        """The quads as :meth:`~shellmesh_mdao.smooth.kernels.ReducedHessian.values` takes them:
         ``(qi, m, sqrt(w) / l)``, ``qi`` their rows in the mesh's quads."""
         return self.qi, self.m, np.sqrt(self.w) * self.s

@@ -69,7 +69,7 @@ def _ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv):
 
 
 def ortho_jacobian(a, b, c, n, su, sv, sw, col_start, ncol, tv):
-    """Jacobian of the quad-corner orthogonality residuals (:class:`~shellmesh_mdao.smooth._Ortho`)
+    """Jacobian of the quad-corner orthogonality residuals (:class:`~shellmesh_mdao.smooth.energy.OrthoTerm`)
     in reduced coordinates, as CSR arrays ``(data, indices, indptr)`` of shape ``(3 m, k)``.
 
     Corner ``q`` has previous, own and next vertex ``a[q]``, ``b[q]``, ``c[q]``, unit quad
@@ -140,7 +140,7 @@ def ortho_gradient(a, b, c, n, su, sv, w, x, nv):
     """Gradient (nv, 3) of ``1/2 sum_q w[q] |r_q|^2`` at positions ``x`` (nv, 3), with the
     corner residuals ``r_q = su (x_a - x_b) - sv n x (x_c - x_b)`` of
     :func:`ortho_jacobian` (``a``, ``b``, ``c``, ``n``, ``su``, ``sv`` as there). The same
-    bits as the numpy version of :meth:`~shellmesh_mdao.smooth._Ortho.gradient`: each role's
+    bits as the numpy version of :meth:`~shellmesh_mdao.smooth.energy.OrthoTerm.gradient`: each role's
     terms summed over the corners in order (``np.bincount``), then the three roles added."""
     x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
     nv = int(nv)
@@ -499,7 +499,7 @@ def _nanmin(x, y):
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _element_frame(C, k, E, cr, L, nn):
     """The corners ``C[:k]`` of one element: its own unit normal into ``nn``
-    (smooth._corner_normals, smooth._unit), its edges ``E``, the corners' cross products
+    (smooth.elements._corner_normals, smooth.elements._unit), its edges ``E``, the corners' cross products
     ``cr`` and the edge lengths ``L`` (norm_rows' order)."""
     if k == 4:
         u0, u1, u2 = C[2, 0] - C[0, 0], C[2, 1] - C[0, 1], C[2, 2] - C[0, 2]
@@ -586,7 +586,7 @@ def face_quality(C, is_tri, nref, tri_scale=2.0 / np.sqrt(3.0)):
     """Per element with corners ``C`` ((m, 4, 3); a triangle's fourth corner not read): the
     smallest corner scaled Jacobian against its own unit normal (triangles times
     ``tri_scale``), replaced by ``dot - 1`` (in [-2, -1]) where that normal points against
-    ``nref`` (m, 3) (a flipped element): :func:`shellmesh_mdao.smooth._face_quality`, the same
+    ``nref`` (m, 3) (a flipped element): :func:`shellmesh_mdao.smooth.elements.oriented_quality`, the same
     bits as its numpy version (``_corner_min_sj`` on ``_corner_normals``, einsum's dot)."""
     C = np.ascontiguousarray(C, dtype=np.float64)
     if C.ndim != 3 or C.shape[1:] != (4, 3):
@@ -604,7 +604,7 @@ def min_corner_sj(P, faces, is_tri, nref=None, tri_scale=2.0 / np.sqrt(3.0)):
     the smallest corner scaled Jacobian, ``(e_prev x e_next) . n / (|e_prev| |e_next|)``, against
     the element's own unit normal and, when ``nref`` (m, 3) is given, against that normal too
     (the smaller); triangles times ``tri_scale`` (1 = equilateral). The same bits as the numpy
-    version (:func:`shellmesh_mdao.smooth._corner_min_sj` on the corners and
+    version (:func:`shellmesh_mdao.smooth.elements._corner_min_sj` on the corners and
     ``_corner_normals``), whose sums of three products it repeats in numpy's order."""
     P = np.ascontiguousarray(P, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(faces, dtype=np.int64)
