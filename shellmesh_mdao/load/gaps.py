@@ -17,8 +17,7 @@ import numpy as np
 
 from ..mesh import ShellMesh
 
-__all__ = ["GAP_MAX_WIDTH", "GAP_MIN_ASPECT", "GAP_MAX_TAPER", "GAP_MAX_WIDTH_RATIO", "gap_closures", "gap_text",
-           "point_segment_distance"]
+__all__ = ["GAP_MAX_WIDTH", "GAP_MIN_ASPECT", "GAP_MAX_TAPER", "GAP_MAX_WIDTH_RATIO", "gap_closures", "gap_text"]
 
 #: Widest gap closed by a strip, as a fraction of the bounding-box diagonal.
 GAP_MAX_WIDTH = 0.01
@@ -108,12 +107,13 @@ def point_segment_distance(q, a, b):
     ab = b - a
     L2 = np.einsum("ij,ij->i", ab, ab)
     out = np.empty(len(q))
-    for s in range(0, len(q), 256):
-        d = q[s:s + 256, None, :] - a[None]
+    step = max(1, 200_000 // max(len(a), 1))          # about 5 MB per block
+    for s in range(0, len(q), step):
+        d = q[s:s + step, None, :] - a[None]
         t = np.clip(np.divide(np.einsum("kij,ij->ki", d, ab), L2, out=np.zeros((len(d), len(a))),
                               where=L2 > 0), 0.0, 1.0)
         r = d - t[..., None] * ab[None]
-        out[s:s + 256] = np.sqrt(np.einsum("kij,kij->ki", r, r).min(1))
+        out[s:s + step] = np.sqrt(np.einsum("kij,kij->ki", r, r).min(1))
     return out
 
 

@@ -9,7 +9,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import MeshValidationError
 from ..mesh import ShellMesh
-from .gaps import gap_closures, gap_text, point_segment_distance
+from .gaps import gap_closures, gap_text
 from .raw import DEFAULT_NAME
 from .report import AXES, SurfaceReport, plane_text
 
@@ -234,10 +234,17 @@ def _flat_face_next_to(mesh: ShellMesh, topo, d_all, tol) -> int:
     _, lab = connected_components(g, directed=False)
     touching = np.unique(lab[fb[flat[fb]]])
     rows = np.flatnonzero(flat & np.isin(lab, touching))
-    v = np.unique(f[rows][f[rows] >= 0])
+    from scipy.spatial import cKDTree
+
+    # distance to the boundary: to points along its edges at most a quarter of the limit apart
+    limit = SYMMETRY_MAX_FLAT * mesh.diagonal
     be = topo.edges[topo.valence == 1]
-    far = point_segment_distance(mesh.points[v], mesh.points[be[:, 0]], mesh.points[be[:, 1]]) \
-        > SYMMETRY_MAX_FLAT * mesh.diagonal
+    a, b = mesh.points[be[:, 0]], mesh.points[be[:, 1]]
+    k = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / (0.25 * limit)).astype(np.int64), 1) + 1
+    t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k - 1, k)
+    samples = np.repeat(a, k, axis=0) + t[:, None] * np.repeat(b - a, k, axis=0)
+    v = np.unique(f[rows][f[rows] >= 0])
+    far = cKDTree(samples).query(mesh.points[v])[0] > limit
     if not far.any():
         return -1
     wide = np.unique(lab[rows[np.isin(f[rows], v[far]).any(1)]])
