@@ -171,7 +171,7 @@ def stage_load(surface, size, options=None) -> PipelineState:
                                "size": size, "options": opts.to_dict()}, "stages": {}}
     # handles or refuses dirty CAD input: duplicates, orientation, intersecting bodies, half
     # models (docs/troubleshooting.md)
-    skin_in, srep = repair_surface(surface)
+    skin_in, srep = repair_surface(surface, size=size)     # size: the tessellation of STEP/IGES
     report["surface"] = srep.to_dict()
     h = check_size(size, skin_in.diagonal)
     if skin_in.n_quads:

@@ -149,7 +149,7 @@ def test_union_keeps_components_and_untouched_bodies():
     wing.component_names = ["wing"]
     fus = _tube(name="fuselage")
     far = _box((0.5, 0.5, 0.5), offset=(20.0, 0.0, 0.0), name="pod")
-    mesh, rep = repair_surface(concatenate([wing, fus, far], merge_tol=None))
+    mesh, rep = repair_surface(concatenate([wing, fus, far], merge_tol=None), keep_groups=True)
     assert rep.n_bodies == 2 and rep.closed
     names = {mesh.component_names[i] for i in np.unique(mesh.component)}
     assert names == {"wing", "fuselage", "pod"}
@@ -261,14 +261,65 @@ def _open_trailing_edge_wing(n_chord=16, n_span=8):
     return w.submesh(~slot).compact()[0]
 
 
-def test_open_trailing_edge_is_refused_or_kept_with_allow_open():
+def test_open_blunt_trailing_edge_is_closed_by_a_strip():
+    w = naca_wing(n_chord=16, n_span=8)
     m = _open_trailing_edge_wing()
-    with pytest.raises(MeshValidationError, match=r"open boundary edges \(1 loop\) at .*not a half model"
-                       r".*cap the open trailing edge"):
-        repair_surface(m)
-    mesh, rep = repair_surface(m, allow_open=True)
-    assert rep.n_open_boundary_edges == 2 * (8 - 1) + 2 and rep.symmetry_plane is None
+    mesh, rep = repair_surface(m)
+    assert rep.closed and rep.n_bodies == 1 and rep.symmetry_plane is None and mesh.check().ok
+    # the strip is the trailing-edge face the wing lost: the same triangles, the same area and volume
+    assert sorted(map(sorted, mesh.faces[:, :3].tolist())) == sorted(map(sorted, w.faces[:, :3].tolist()))
+    assert mesh.face_areas().sum() == pytest.approx(w.face_areas().sum(), rel=1e-12)
+    assert _volume(mesh) == pytest.approx(_volume(w), rel=1e-12)
+    (g,) = rep.closed_gaps
+    k = 2 * 16
+    te = np.linalg.norm(w.points[0::k] - w.points[k - 1::k], axis=1)        # TE thickness per section
+    assert g["n_triangles"] == 2 * (8 - 1) and g["length"] == pytest.approx(6.0, rel=0.01)
+    assert te.min() <= g["width_min"] <= te[-2] + 1e-12 and te[1] <= g["width_max"] <= te.max() + 1e-12
+    assert g["area"] == pytest.approx(w.face_areas().sum() - m.face_areas().sum(), rel=1e-9)
+    assert [r for r in rep.repairs if r.startswith("closed an open gap (an open blunt trailing edge) 6.013 long, 0.0111 to 0.0195 wide")]
+    json.dumps(rep.to_dict())
+
+
+def test_open_trailing_edge_is_refused_with_close_gaps_false_or_kept_with_allow_open():
+    m = _open_trailing_edge_wing()
+    with pytest.raises(MeshValidationError, match=r"an open gap 6.013 long, .* wide, from \(.*\) to \(.*\): an open "
+                       r"blunt trailing edge .*close_gaps=True"):
+        repair_surface(m, close_gaps=False)
+    mesh, rep = repair_surface(m, allow_open=True, close_gaps=False)
+    assert rep.n_open_boundary_edges == 2 * (8 - 1) + 2 and rep.symmetry_plane is None and not rep.closed_gaps
     assert "not a symmetry plane" in rep.warnings[0]
+
+
+def test_open_trailing_edge_of_a_half_wing_is_closed_and_the_root_stays_open():
+    """The corpus CAD wing's case on a generated wing: the trailing edge open from the root (in
+    the symmetry plane) to mid-span, where a trailing-edge face begins."""
+    w = _half_wing(n_chord=16, n_span=9)
+    k = 2 * 16
+    f = w.faces[:, :3]
+    j, sec = f % k, f // k
+    slot = np.isin(j, [0, k - 1]).all(1) & (sec.min(1) != sec.max(1)) & (sec.max(1) <= 4)
+    mesh, rep = repair_surface(w.submesh(~slot).compact()[0])
+    (g,) = rep.closed_gaps
+    assert g["n_triangles"] == 2 * 4 and g["start"][1] == 0.0 and g["end"][1] == pytest.approx(3.0)
+    assert rep.symmetry_plane["axis"] == "y" and rep.n_boundary_loops == 1
+    bv = np.unique(mesh.boundary_edges())
+    assert np.all(mesh.points[bv, 1] == 0.0) and rep.symmetry_vertices == bv.tolist()
+    assert _volume(mesh) == pytest.approx(_volume(w), rel=1e-12)
+
+
+def test_open_gaps_that_are_not_trailing_edges_stay_refused():
+    # a half wing with an open tip too (its tip cap removed): an airfoil-shaped opening off the
+    # symmetry plane, not two parallel sides
+    w = _half_wing(n_chord=16, n_span=8)
+    tip = (w.points[w.faces[:, :3], 1] == 6.0).all(1)
+    with pytest.raises(MeshValidationError, match=r"open boundary edges \(2 loops\).*do not lie in one plane"):
+        repair_surface(w.submesh(~tip).compact()[0])
+    # a missing panel of the upper skin: a wide hole
+    w = naca_wing(n_chord=16, n_span=8)
+    c = w.face_centroids()
+    panel = (np.abs(c[:, 1] - 3.0) < 0.5) & (c[:, 2] > 0.05) & (np.abs(c[:, 1] - 6.0) > 1e-9)
+    with pytest.raises(MeshValidationError, match=r"open boundary edges \(\d loops?\) .*do not lie in one plane"):
+        repair_surface(w.submesh(~panel).compact()[0])
 
 
 def test_hole_in_a_flat_face_is_not_a_symmetry_plane():
@@ -342,3 +393,70 @@ def test_corpus_surface_repairs_to_itself_up_to_orientation(geometry_dir):
     m2, r2 = repair_surface(geometry_dir / "swept_wing.stl")       # stored with inward normals
     assert r2.repairs == ["turned 1 inside-out body (12792 faces) to face outward"]
     assert _volume(m2, m2.points.mean(0)) > 0
+
+
+# ------------------------------------------------------------------ half models with thin features
+def _half_fin(chord=1.0, thickness=0.06, height=1.0, x0=2.0, z0=0.3, n=32, m=8, sliver=False) -> ShellMesh:
+    """The y >= 0 half of a thin vertical fin (NACA 00xx sections with a sharp trailing edge, in x-y
+    planes, stacked along z from ``z0``) with flat caps: open along its leading and trailing edges
+    and its caps' chords, all in y = 0. Its trailing edge meets y = 0 at about 4 degrees;
+    ``sliver`` adds a row 1e-4 chord before the trailing edge whose faces lie within the plane
+    tolerance of y = 0."""
+    u = (1.0 - np.cos(np.pi * np.arange(n + 1) / n)) / 2.0
+    if sliver:
+        u = np.sort(np.append(u, 1.0 - 1e-4))
+    yt = 5 * thickness * (0.2969 * np.sqrt(u) - 0.1260 * u - 0.3516 * u ** 2 + 0.2843 * u ** 3 - 0.1036 * u ** 4)
+    yt[[0, -1]] = 0.0
+    k = len(u)
+    z = z0 + height * np.linspace(0.0, 1.0, m + 1)
+    P = np.stack([np.tile(x0 + chord * u, m + 1), np.tile(chord * yt, m + 1), np.repeat(z, k)], 1)
+    i, j = np.meshgrid(np.arange(m), np.arange(k - 1), indexing="ij")
+    a = (i * k + j).ravel()
+    F = [np.stack([a, a + 1, a + k + 1], 1), np.stack([a, a + k + 1, a + k], 1)]
+    for row in (0, m):
+        c = np.arange(1, k - 1) + row * k
+        F.append(np.stack([np.full(len(c), row * k), c + 1, c] if row == 0 else [np.full(len(c), row * k), c, c + 1], 1))
+    return ShellMesh(P, np.vstack(F), None, ["fin"])
+
+
+@pytest.mark.parametrize("sliver", [False, True])
+def test_half_model_with_a_thin_fin_meeting_the_plane_at_a_shallow_angle_is_accepted(sliver):
+    fus, fin = _half(_tube()), _half_fin(sliver=sliver)
+    m = concatenate([fus, fin], merge_tol=None)
+    # the case: faces next to the fin's trailing edge lie within 25 degrees of the plane (some in it)
+    t = fin.topology()
+    te = t.edges[(t.valence == 1) & (fin.points[t.edges, 0] == 3.0).all(1)]
+    fb = t.edge_faces[t.edge_faces_ptr[t.edge_ids(te)]]
+    assert (np.abs(fin.face_normals()[fb, 1]) > 0.99).all()
+    if sliver:
+        assert (np.abs(fin.points[fin.faces[fb, :3], 1]).max(1) < 1e-5 * m.diagonal).all()   # in the plane
+    mesh, rep = repair_surface(m)
+    assert rep.symmetry_plane["axis"] == "y" and rep.symmetry_plane["offset"] == 0.0
+    assert rep.n_bodies == 1 and rep.n_nonmanifold_edges == 0 and mesh.check().ok
+    assert any("joined 2 intersecting bodies" in r for r in rep.repairs)
+    bv = np.unique(mesh.boundary_edges())
+    assert np.abs(mesh.points[bv, 1]).max() <= 1e-12 and rep.symmetry_vertices == bv.tolist()
+    # the fin's trailing edge, from the fuselage top (z = 0.45 at x = 3) to its tip, is symmetry boundary
+    be = mesh.boundary_edges()
+    on_te = np.isclose(mesh.points[be, 0], 3.0).all(1)
+    assert np.linalg.norm(np.diff(mesh.points[be[on_te]], axis=1), axis=2).sum() == pytest.approx(1.3 - 0.45, abs=0.01)
+    assert mesh.points[:, 2].max() == pytest.approx(1.3)
+    fin_alone, rep2 = repair_surface(fin)
+    assert rep2.symmetry_plane["axis"] == "y" and rep2.n_open_boundary_edges == fin.boundary_edges().shape[0]
+
+
+def test_hole_in_the_flat_root_face_of_a_wing_is_refused():
+    w = naca_wing(n_chord=16, n_span=8)
+    c = w.face_centroids()
+    root = np.flatnonzero(np.abs(c[:, 1]) < 1e-12)
+    hole = root[np.argsort(np.abs(c[root, 0] - 0.6))[:3]]          # three cap triangles mid-chord
+    keep = np.ones(w.n_faces, bool)
+    keep[hole] = False
+    with pytest.raises(MeshValidationError, match=r"faces next to it lie in that plane too .*: a hole in a flat face"):
+        repair_surface(w.submesh(keep).compact()[0])
+
+
+def test_flat_sheet_with_its_boundary_in_its_plane_is_not_a_half_model():
+    p = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0]], float)
+    with pytest.raises(MeshValidationError, match="a hole in a flat face"):
+        repair_surface(ShellMesh(p, [[0, 1, 2, 3], [1, 4, 5, 2]]))

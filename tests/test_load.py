@@ -237,6 +237,62 @@ def test_gmsh_msh_physical_groups(tmp_path):
     assert rep.closed and rep.n_bodies == 1 and set(np.unique(mesh.component)) == {0, 1}
 
 
+def _gmsh_box_msh(path, groups):
+    """A closed box written by gmsh with its faces in physical surface groups ``{name: faces}``
+    (face indices 0..5)."""
+    gmsh = pytest.importorskip("gmsh")
+    own = not gmsh.isInitialized()
+    if own:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("g")
+        gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        surfs = [t for _, t in gmsh.model.getEntities(2)]
+        for name, faces in groups.items():
+            gmsh.model.addPhysicalGroup(2, [surfs[i] for i in faces], name=name)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.3)
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+        gmsh.model.remove()
+    finally:
+        if own:
+            gmsh.finalize()
+    return path
+
+
+@pytest.mark.parametrize("groups", [{"fuselage": range(6)}, {"skin": range(6)}, {"wing": [0, 1, 2], "body": [3, 4, 5]}])
+def test_physical_groups_of_an_input_mesh_are_read_as_skin(tmp_path, groups):
+    from shellmesh_mdao.load import repair_surface
+    from shellmesh_mdao.pipeline import stage_load
+
+    path = _gmsh_box_msh(tmp_path / "g.msh", groups)
+    mesh, rep = load_surface(path)                     # described as in the file
+    assert mesh.component_names == list(groups)
+    fixed, rep = repair_surface(path)                  # made ready for meshing: the skin
+    assert fixed.component_names == ["skin"] and (fixed.component == 0).all() and rep.component_names == ["skin"]
+    assert np.array_equal(fixed.faces, mesh.faces) and rep.closed
+    lines = [r for r in rep.repairs if r.startswith("read the input's group")]
+    assert len(lines) == (0 if list(groups) == ["skin"] else 1)
+    if lines:
+        assert all(f"'{g}' (" in lines[0] for g in groups)
+    kept, _ = repair_surface(path, keep_groups=True)
+    assert kept.component_names == list(groups)
+    st = stage_load(path, 0.2)                         # the pipeline's load stage
+    assert st.surface.component_names == ["skin"] and (st.surface.component == 0).all()
+
+
+@pytest.mark.parametrize("ext", ["vtu", "bdf", "inp"])
+def test_families_of_other_mesh_files_are_read_as_skin_by_repair(tmp_path, ext):
+    from shellmesh_mdao.load import repair_surface
+
+    path = write_mesh(_families_mesh(), tmp_path / f"m.{ext}")
+    mesh, rep = repair_surface(path)
+    assert mesh.component_names == ["skin"] and (mesh.component == 0).all() and rep.closed
+    assert any("'rib 1' (4 faces)" in r and "'spar' (4 faces)" in r for r in rep.repairs)
+
+
 def test_step_via_gmsh(tmp_path):
     gmsh = pytest.importorskip("gmsh")
     path = tmp_path / "box.step"

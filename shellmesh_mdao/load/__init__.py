@@ -13,7 +13,9 @@ surface as CAD exports really come ready for meshing or refuses it with a
 :class:`MeshValidationError` naming the defect, where it is and the fix: faces oriented
 consistently and outward per body, intersecting bodies joined by a boolean union
 (manifold3d), a half model's symmetry-plane boundary accepted and reported (the clamped
-edge), non-manifold edges and other open boundaries refused, a warning for unlikely units.
+edge), an open blunt trailing edge closed by a strip of triangles (reported), the input's
+groups read as the skin, non-manifold edges and other open boundaries refused, a warning for
+unlikely units.
 The policy per defect is tabulated in ``docs/troubleshooting.md``.
 
 :func:`load_mesh` reads one of our own output files (.vtu, .msh, .bdf/.nas, .inp) back
@@ -21,9 +23,10 @@ exactly, with its components, node order and element order (see
 :mod:`shellmesh_mdao.export`).
 
 Modules: ``raw`` (the raw mesh a reader returns, the format tables, path checks),
-``readers`` (the file readers), ``cad`` (STEP/IGES through gmsh), ``clean`` (the cleaning every
-load does), ``report`` (:class:`SurfaceReport`), ``repair`` (dirty inputs: the defects counted,
-handled or refused), ``api`` (:func:`load_surface`, :func:`repair_surface`, :func:`load_mesh`).
+``readers`` (the file readers), ``cad`` (STEP/IGES healed, sewn and tessellated through gmsh),
+``clean`` (the cleaning every load does), ``report`` (:class:`SurfaceReport`), ``gaps`` (open
+gaps closed by strips), ``repair`` (dirty inputs: the defects counted, handled or refused),
+``api`` (:func:`load_surface`, :func:`repair_surface`, :func:`load_mesh`).
 """
 from __future__ import annotations
 

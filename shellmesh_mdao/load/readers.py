@@ -21,9 +21,9 @@ from .raw import DEFAULT_NAME, RawMesh
 __all__ = ["read_file"]
 
 
-def read_file(p: Path, cad_mesh_size=None) -> RawMesh:
+def read_file(p: Path, cad_mesh_size=None, size=None) -> RawMesh:
     """The raw mesh of file ``p`` by the reader of its extension (``cad_mesh_size``: the element
-    size of a STEP/IGES tessellation)."""
+    size of a STEP/IGES tessellation, else derived from ``size``, the target element size)."""
     ext = p.suffix.lower()
     try:
         if ext in (".stl", ".obj", ".ply", ".off"):
@@ -49,7 +49,7 @@ def read_file(p: Path, cad_mesh_size=None) -> RawMesh:
         if ext == ".inp":
             return _read_inp(p)
         if ext in (".step", ".stp", ".iges", ".igs"):
-            return read_cad(p, cad_mesh_size)
+            return read_cad(p, cad_mesh_size, size)
     except (ShellMeshError, ImportError):
         raise       # a missing library is an installation problem, not a corrupt file
     except MemoryError:

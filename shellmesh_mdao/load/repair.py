@@ -9,10 +9,12 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import MeshValidationError
 from ..mesh import ShellMesh
+from .gaps import gap_closures, gap_text
+from .raw import DEFAULT_NAME
 from .report import AXES, SurfaceReport, plane_text
 
-__all__ = ["UNITS_DIAGONAL_RANGE", "SYMMETRY_TOL", "SYMMETRY_MAX_COS", "symmetry_boundary_vertices", "describe_surface",
-           "repair_defects"]
+__all__ = ["UNITS_DIAGONAL_RANGE", "SYMMETRY_TOL", "SYMMETRY_MAX_COS", "SYMMETRY_MAX_SHALLOW", "SYMMETRY_MAX_FLAT",
+           "symmetry_boundary_vertices", "describe_surface", "repair_defects", "read_as_skin"]
 
 
 # =========================================================================== dirty inputs
@@ -20,9 +22,18 @@ __all__ = ["UNITS_DIAGONAL_RANGE", "SYMMETRY_TOL", "SYMMETRY_MAX_COS", "symmetry
 UNITS_DIAGONAL_RANGE = (1e-3, 1e5)
 #: Open-boundary vertices within this fraction of the diagonal of one plane lie "in" it.
 SYMMETRY_TOL = 1e-5
-#: A face next to a symmetry-plane boundary must not lie in that plane: |n_face . n_plane|
-#: at most this (the surface crosses the plane instead of ending in a hole of a flat face).
+#: A face next to a symmetry-plane boundary with |n_face . n_plane| above this lies at a
+#: shallow angle to the plane (within about 25 degrees of it).
 SYMMETRY_MAX_COS = 0.9
+#: A half model's surface crosses its symmetry plane: faces at a shallow angle to the plane
+#: (a thin fin or trailing edge meeting it) may line at most this fraction of the boundary's
+#: length; more is a hole in a flat (or gently curved) face.
+SYMMETRY_MAX_SHALLOW = 0.5
+#: Faces lying in a symmetry plane (every vertex within :data:`SYMMETRY_TOL`) next to its
+#: boundary are accepted only as thin strips along it: every vertex of such a patch within this
+#: fraction of the diagonal of the boundary (where a thin fin or trailing edge meets the plane at
+#: a shallow angle). A wider patch is a flat face with a hole in it, not a half model.
+SYMMETRY_MAX_FLAT = 1e-3
 
 
 def _orientation_conflicts(mesh: ShellMesh) -> int:
@@ -183,30 +194,61 @@ def _boundary_info(mesh: ShellMesh, tol_frac: float = SYMMETRY_TOL):
             "both sides of it, so it is not a half model cut at that plane")
     if d_all.max() > tol:
         normal = -normal
-    fb = topo.edge_faces[topo.edge_faces_ptr[np.flatnonzero(topo.valence == 1)]]
-    cos = np.abs(_unit_normals(mesh.points, mesh.faces[fb]) @ normal)
-    if cos.max() > SYMMETRY_MAX_COS:
-        k = int(fb[np.argmax(cos)])
+    # the surface must cross the plane: faces at a shallow angle along at most part of the
+    # boundary (thin features), and faces lying in it only as thin strips
+    bid = np.flatnonzero(topo.valence == 1)
+    fb = topo.edge_faces[topo.edge_faces_ptr[bid]]
+    cos = np.abs(mesh.face_normals()[fb] @ normal)
+    elen = np.linalg.norm(mesh.points[topo.edges[bid, 1]] - mesh.points[topo.edges[bid, 0]], axis=1)
+    shallow = float(elen[cos > SYMMETRY_MAX_COS].sum() / max(elen.sum(), 1e-300))
+    k = int(fb[np.argmax(cos)]) if shallow > SYMMETRY_MAX_SHALLOW else _flat_face_next_to(mesh, topo, d_all, tol)
+    if k >= 0:
         c = mesh.points[mesh.faces[k, :3]].mean(0)
         return n_loops, None, (
             f"the open boundary lies in the plane {plane_text(normal, point, axis)} but faces next to it lie in "
-            f"that plane too (face {k} at ({', '.join(f'{v:.6g}' for v in c)})): a hole in a flat face, not a "
-            "half model cut at its symmetry plane")
+            f"that plane too (face {k} at ({', '.join(f'{v:.6g}' for v in c)}); faces within 25 degrees of the "
+            f"plane along {100 * shallow:.0f}% of the boundary): a hole in a flat face, not a half model cut at "
+            "its symmetry plane")
     plane = {"normal": [float(v) + 0.0 for v in normal], "point": [float(v) for v in point],
              "offset": float(point @ normal), "axis": axis}
     return n_loops, plane, ""
 
 
-def _unit_normals(points, faces) -> np.ndarray:
-    """Unit normals of a few faces (quads: cross product of the diagonals)."""
-    quad = faces[:, 3] >= 0
-    a = points[faces[:, 0]]
-    b = points[faces[:, 1]]
-    c = points[faces[:, 2]]
-    d = points[np.maximum(faces[:, 3], 0)]
-    n = np.where(quad[:, None], np.cross(c - a, d - b), np.cross(b - a, c - a))
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+def _flat_face_next_to(mesh: ShellMesh, topo, d_all, tol) -> int:
+    """A face lying in the plane (every vertex within ``tol``; ``d_all`` the signed distances
+    of all vertices) next to the open boundary, in a patch of such faces with a vertex farther
+    than :data:`SYMMETRY_MAX_FLAT` of the diagonal from the open boundary: a flat face with a
+    hole, not a thin strip where a thin feature meets the plane at a shallow angle. ``-1``
+    when there is none."""
+    f = mesh.faces
+    flat = np.all((np.abs(d_all[f]) <= tol) | (f < 0), axis=1)
+    fb = topo.edge_faces[topo.edge_faces_ptr[np.flatnonzero(topo.valence == 1)]]
+    if not flat[fb].any():
+        return -1
+    # patches of flat faces (connected across edges), those touching the boundary
+    man = np.flatnonzero(topo.valence == 2)
+    f0 = topo.edge_faces[topo.edge_faces_ptr[man]]
+    f1 = topo.edge_faces[topo.edge_faces_ptr[man] + 1]
+    both = flat[f0] & flat[f1]
+    g = sparse.coo_matrix((np.ones(int(both.sum())), (f0[both], f1[both])), shape=(mesh.n_faces, mesh.n_faces))
+    _, lab = connected_components(g, directed=False)
+    touching = np.unique(lab[fb[flat[fb]]])
+    rows = np.flatnonzero(flat & np.isin(lab, touching))
+    from scipy.spatial import cKDTree
+
+    # distance to the boundary: to points along its edges at most a quarter of the limit apart
+    limit = SYMMETRY_MAX_FLAT * mesh.diagonal
+    be = topo.edges[topo.valence == 1]
+    a, b = mesh.points[be[:, 0]], mesh.points[be[:, 1]]
+    k = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / (0.25 * limit)).astype(np.int64), 1) + 1
+    t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k - 1, k)
+    samples = np.repeat(a, k, axis=0) + t[:, None] * np.repeat(b - a, k, axis=0)
+    v = np.unique(f[rows][f[rows] >= 0])
+    far = cKDTree(samples).query(mesh.points[v])[0] > limit
+    if not far.any():
+        return -1
+    wide = np.unique(lab[rows[np.isin(f[rows], v[far]).any(1)]])
+    return int(fb[flat[fb] & np.isin(lab[fb], wide)].min())
 
 
 def _n_zero_area(mesh: ShellMesh) -> int:
@@ -427,12 +469,14 @@ def describe_surface(mesh: ShellMesh, fmt: str, path: str, counts: dict, notes: 
         n_components=len(present), component_names=[mesh.component_names[i] for i in present],
         units=_units_note(fmt), notes=list(notes), n_boundary_loops=n_loops, symmetry_plane=plane,
         symmetry_vertices=symmetry_boundary_vertices(mesh, plane).tolist() if plane else [],
-        warnings=_units_warnings(mesh.diagonal))
+        closed_gaps=list(known.get("gaps", [])), warnings=_units_warnings(mesh.diagonal))
     return report
 
 
-def repair_defects(mesh: ShellMesh, name: str, allow_open: bool, union: bool):
-    """Handle or refuse the defects :func:`describe_surface` found (see :func:`repair_surface`)."""
+def repair_defects(mesh: ShellMesh, name: str, allow_open: bool, union: bool, close_gaps: bool = True):
+    """Handle or refuse the defects :func:`describe_surface` found (see :func:`repair_surface`).
+    Returns ``(mesh, repairs, warnings, known)``; ``known`` holds counts the report need not
+    compute again and ``gaps``, the gaps closed by strips (:func:`~.gaps.gap_closures`)."""
     repairs, warns = [], []
     topo = mesh.topology()
     nm = np.flatnonzero(topo.valence > 2)
@@ -453,6 +497,15 @@ def repair_defects(mesh: ShellMesh, name: str, allow_open: bool, union: bool):
                        f"({_orientation_conflicts(mesh)} edges were inconsistent)")
         mesh = ShellMesh(mesh.points, faces, mesh.component, list(mesh.component_names))
     n_loops, plane, reason = _boundary_info(mesh)
+    gaps = []
+    if plane is None and n_loops and (close_gaps or not allow_open):
+        mesh, gaps, n_loops, plane = _close_gaps(mesh, name, close_gaps, n_loops, plane)
+        if gaps:
+            body = _face_bodies(mesh.topology(), mesh.n_faces)
+            nb = int(body.max()) + 1
+            for g in gaps:
+                repairs.append(f"closed an open gap (an open blunt trailing edge) {gap_text(g)} by a strip of "
+                               f"{g['n_triangles']} triangles")
     topo = mesh.topology()
     be = topo.edges[topo.valence == 1]
     open_face = np.zeros(mesh.n_faces, bool)
@@ -502,7 +555,42 @@ def repair_defects(mesh: ShellMesh, name: str, allow_open: bool, union: bool):
                        f"lie in the symmetry plane {plane_text(plane['normal'], plane['point'], plane['axis'])}; "
                        "they are a clamped (symmetry) boundary")
     # consistent by construction; the body count is unchanged unless bodies were joined
-    known = {"n_inconsistent": 0}
+    known = {"n_inconsistent": 0, "gaps": gaps}
     if not any(r.startswith("joined") for r in repairs):
         known["n_bodies"] = nb
     return mesh, repairs, warns, known
+
+
+def _close_gaps(mesh: ShellMesh, name: str, close: bool, n_loops: int, plane):
+    """The mesh with its open gaps closed by strips when that leaves it closed or a valid half
+    model (:func:`~.gaps.gap_closures`); refused when ``close`` is false and such gaps exist.
+    Returns ``(mesh, gaps, n_loops, plane)``, unchanged when there is nothing to close."""
+    for closed, gaps in gap_closures(mesh, SYMMETRY_TOL * mesh.diagonal):
+        n2, plane2, _ = _boundary_info(closed)
+        if n2 and plane2 is None:
+            continue
+        if not close:
+            more = f" (and {len(gaps) - 1} more)" if len(gaps) > 1 else ""
+            raise MeshValidationError(
+                f"{name}: an open gap {gap_text(gaps[0])}{more}: an open blunt trailing edge (the trailing-edge "
+                "face is missing). Close it in CAD, or let the load close it by a strip of triangles "
+                "(close_gaps=True, the default)")
+        return closed, gaps, n2, plane2
+    return mesh, [], n_loops, plane
+
+
+def read_as_skin(mesh: ShellMesh) -> tuple[ShellMesh, str | None]:
+    """Every group (component) of an input surface read as the one component ``skin``: the
+    surface to mesh is the skin, and the members (ribs, spars) come from the layout, so a name
+    the input carries (a Gmsh physical group, an element set, a property) is not a member.
+    Returns the mesh and the repair line (``None`` when the surface already is ``skin``)."""
+    present = np.unique(mesh.component)
+    names = [mesh.component_names[i] if i < len(mesh.component_names) else f"component_{i}" for i in present]
+    if names == [DEFAULT_NAME] and list(mesh.component_names) == [DEFAULT_NAME]:
+        return mesh, None
+    out = ShellMesh(mesh.points, mesh.faces, np.zeros(mesh.n_faces, np.int32), [DEFAULT_NAME])
+    counts = np.bincount(mesh.component)[present]
+    shown = ", ".join(f"'{n}' ({c} faces)" for n, c in zip(names[:6], counts[:6]))
+    more = f" and {len(names) - 6} more" if len(names) > 6 else ""
+    return out, (f"read the input's group{'s' if len(names) > 1 else ''} {shown}{more} as the skin (component "
+                 f"'{DEFAULT_NAME}'): members come from the layout (keep_groups=True keeps the groups)")

@@ -21,7 +21,10 @@ class SurfaceReport:
     surface, ``point``, ``offset`` = point . normal, ``axis`` 'x'/'y'/'z' or None) is set for a
     half model whose open boundary lies in one plane, ``symmetry_vertices`` are those
     boundary vertices (indices into the returned mesh: the clamped/symmetry boundary);
-    ``warnings`` holds units warnings and accepted defects."""
+    ``closed_gaps`` the open gaps (open blunt trailing edges) :func:`repair_surface` closed by
+    strips of triangles, one dict each (``n_triangles``, ``length``, ``width_min``,
+    ``width_max``, ``start`` and ``end`` points, ``area``); ``warnings`` holds units warnings
+    and accepted defects."""
 
     path: str
     format: str
@@ -48,6 +51,7 @@ class SurfaceReport:
     n_boundary_loops: int = 0
     symmetry_plane: dict | None = None
     symmetry_vertices: list = field(default_factory=list)
+    closed_gaps: list = field(default_factory=list)
     repaired: bool = False
     repairs: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
