@@ -67,9 +67,11 @@ def test_classifier_on_known_messages(manifest, geometry_dir):
         "a projection refusal needs a member outside the wing, not just a tight layout"
     assert SL.classify_refusal("ProjectionError", proj, "project", dict(inside, outside=["right_wing/rib_0"]))[0] \
         == "invalid layout"
-    assert SL.classify_refusal("ImprintError", "x: the imprinted curve is broken into pieces; use a smaller --size",
+    assert SL.classify_refusal("ImprintError", "x: the imprinted curve is broken into pieces; use a smaller --size [near [0.1, 0.2, 0.3]; "
+                              "within two skin edges of 'w/spar_0']",
                                "imprint", inside)[0] == "invalid layout"
-    assert SL.classify_refusal("ImprintError", "x: the imprinted curve is broken into pieces; use a smaller --size",
+    assert SL.classify_refusal("ImprintError", "x: the imprinted curve is broken into pieces; use a smaller --size [near [0.1, 0.2, 0.3]; "
+                              "within two skin edges of 'w/spar_0']",
                                "imprint", dict(inside, tight=""))[0] == "FAIL"
     assert SL.classify_refusal("ImprintError", "something new went wrong", "imprint", inside)[0] == "FAIL"
     # ribs 0.001 apart on the straight wing (span 3.9): 0.0039 apart, below the size 0.02
