@@ -370,6 +370,6 @@ def test_doc_examples_load(tmp_path):
 
 def test_doc_lists_every_key():
     text = DOC.read_text(encoding="utf-8")
-    from shellmesh_mdao import layout as L
+    from shellmesh_mdao.layout import schema as L
     for k in L._TOP_KEYS + L._WING_KEYS + L._RIB_KEYS + L._SPAR_KEYS + L._MEMBER_KEYS:
         assert f"`{k}`" in text or f"`ribs.{k}`" in text or f"`spars.{k}`" in text, k

@@ -34,11 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import LayoutError, SizeError
-from .mesh import norm_rows
+from ..errors import LayoutError, SizeError
+from ..mesh import norm_rows
 
-__all__ = ["Layout", "WingLayout", "ExplicitMember", "MemberSpec", "load_layout", "layout_from_manifest",
-           "explicit_plane", "MIN_UP_SPAN_ANGLE_DEG"]
+__all__ = ["Layout", "WingLayout", "StationWing", "ExplicitMember", "MemberSpec", "load_layout",
+           "layout_from_manifest", "explicit_plane", "resample_polyline", "MIN_UP_SPAN_ANGLE_DEG", "RIB_ORIENTATIONS",
+           "END_RIBS"]
 
 #: ``up`` must make at least this angle with the span line (else the rib normal is undefined).
 MIN_UP_SPAN_ANGLE_DEG = 10.0
@@ -50,6 +51,14 @@ _WING_KEYS = ("name", "root_le", "root_te", "tip_le", "tip_te", "up", "ribs", "s
 _WING_REQUIRED = ("name", "root_le", "root_te", "tip_le", "tip_te")
 _RIB_KEYS = ("count", "eta")
 _SPAR_KEYS = ("chord_fractions",)
+_STATION_KEYS = ("name", "axis", "root", "tip", "cranks", "up", "near", "aft", "ribs", "spars")
+_STATION_REQUIRED = ("name", "axis", "root", "tip")
+_STATION_RIB_KEYS = ("count", "eta", "orientation", "spar", "end_ribs")
+_STATION_SPAR_KEYS = ("chord_fractions", "tip_chord_fractions", "crank_chord_fractions")
+#: rib orientations of a station-given wing (or a vector: the rib planes' normal)
+RIB_ORIENTATIONS = ("normal_to_spar", "streamwise", "normal_to_midchord")
+#: how the root and tip ribs of a station-given wing lie
+END_RIBS = ("station", "same")
 _MEMBER_KEYS = ("name", "upper", "lower", "direction", "lower_direction")
 _MEMBER_REQUIRED = ("name", "upper", "lower")
 
@@ -178,6 +187,75 @@ class WingLayout:
 
 
 @dataclass(frozen=True)
+class StationWing:
+    """A wing given by its span axis and stations (``docs/layout.md``, 'Station-given wing'):
+    the planform (leading and trailing edge, chord, thickness at every station) is measured
+    from the skin when the layout is resolved against it
+    (:func:`~shellmesh_mdao.layout.wingbox.resolve_layout`, run by the pipeline's layout stage).
+
+    ``axis`` the span axis; ``root``, ``tip`` and ``cranks`` station coordinates ``x·axis/|axis|``;
+    ``up``, ``near`` (a point of the root section), ``aft`` (leading -> trailing edge) optional
+    hints; ``rib_eta`` span fractions (0 root, 1 tip) of the ribs, ``rib_count`` when given as a
+    count; ``rib_orientation`` one of :data:`RIB_ORIENTATIONS` or a vector (the rib planes'
+    normal); ``rib_spar`` the spar the ribs are normal to (``normal_to_spar``; None: the last);
+    ``end_ribs`` :data:`END_RIBS`; ``spar_chord`` the spars' chord fractions at the root (and
+    everywhere when ``spar_chord_tip`` is None), ``spar_chord_tip`` at the tip,
+    ``spar_chord_cranks`` at each crank (linear in the span fraction between them).
+
+    A resolved wing (:attr:`resolved`) also holds its measured ``planform``
+    (:class:`~shellmesh_mdao.layout.planform.Planform`), its members ``specs``
+    (:class:`MemberSpec`, in :meth:`Layout.members` order) and ``notes`` (what the resolution
+    decided that the user did not ask for, e.g. edge webs)."""
+
+    name: str
+    axis: Vec
+    root: float
+    tip: float
+    cranks: tuple = ()
+    up: Vec | None = None
+    near: Vec | None = None
+    aft: Vec | None = None
+    rib_eta: tuple = ()
+    rib_count: int | None = None
+    rib_orientation: object = "normal_to_spar"
+    rib_spar: int | None = None
+    end_ribs: str = "station"
+    spar_chord: tuple = ()
+    spar_chord_tip: tuple | None = None
+    spar_chord_cranks: tuple | None = None
+    planform: object = field(default=None, compare=False, repr=False)
+    specs: tuple = field(default=(), compare=False, repr=False)
+    notes: tuple = field(default=(), compare=False, repr=False)
+
+    @property
+    def resolved(self) -> bool:
+        return self.planform is not None
+
+    def spar_fractions(self, eta) -> np.ndarray:
+        """Chord fractions (..., n_spars) of the spars at span fractions ``eta`` (piecewise
+        linear through the root, crank and tip values)."""
+        eta = np.asarray(eta, dtype=np.float64)
+        c0 = np.asarray(self.spar_chord, dtype=np.float64)
+        if self.spar_chord_tip is None:
+            return np.broadcast_to(c0, eta.shape + c0.shape).copy()
+        span = self.tip - self.root
+        knots = [0.0] + [(c - self.root) / span for c in self.cranks] + [1.0]
+        vals = [c0] + ([np.asarray(v, dtype=np.float64) for v in self.spar_chord_cranks]
+                       if self.spar_chord_cranks is not None else
+                       [None] * len(self.cranks)) + [np.asarray(self.spar_chord_tip, dtype=np.float64)]
+        if any(v is None for v in vals):          # no crank values: linear from the root to the tip
+            knots, vals = [0.0, 1.0], [vals[0], vals[-1]]
+        V = np.stack(vals)
+        return np.stack([np.interp(eta, knots, V[:, j]) for j in range(V.shape[1])], -1)
+
+    def predicted_names(self) -> list:
+        """Member names the wing will have whatever its measured planform: its spars (their
+        pieces and edge webs are named after resolution) then its ribs."""
+        return [f"{self.name}/spar_{j}" for j in range(len(self.spar_chord))] + \
+            [f"{self.name}/rib_{k}" for k in range(len(self.rib_eta))]
+
+
+@dataclass(frozen=True)
 class ExplicitMember:
     """The paper's general member: polylines ``upper`` and ``lower`` (each (k, 3)) projected
     onto the skin; ``upper`` along ``direction``, ``lower`` along ``lower_direction``
@@ -222,6 +300,8 @@ class MemberSpec:
                         planes (or the station-0/1 rib planes).
     ``chord_range``     rib: (c_a, c_b); ``eta_range`` spar: (eta_start, eta_end).
     ``upper``, ``lower``, ``direction``, ``lower_direction``: explicit members only.
+    ``seeds``           (k, 3) the defining curve's points when the wing gives them (a full-chord
+                        rib of a station-given wing); :meth:`seed_points` resamples them.
     """
 
     name: str
@@ -245,6 +325,7 @@ class MemberSpec:
     direction: np.ndarray | None = None
     lower_direction: np.ndarray | None = None
     wing_layout: WingLayout | None = field(default=None, repr=False)
+    seeds: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def is_planar(self) -> bool:
@@ -258,6 +339,8 @@ class MemberSpec:
             raise LayoutError(f"member '{self.name}' is explicit: it has no chord-plane seed points; "
                               "use its upper/lower polylines")
         n = max(int(n), 2)
+        if self.seeds is not None:
+            return resample_polyline(self.seeds, n)
         w = self.wing_layout
         if self.kind == "rib":
             c = np.linspace(self.chord_range[0], self.chord_range[1], n)
@@ -268,6 +351,19 @@ class MemberSpec:
             pts = w.chord_point(eta, np.full(n, self.parameter))
         pts[0], pts[-1] = self.start, self.end
         return pts
+
+
+def resample_polyline(points, n: int) -> np.ndarray:
+    """``n`` points evenly spaced by arc length along the polyline ``points`` (k, 3), its two
+    ends exactly."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    s = np.concatenate([[0.0], np.cumsum(norm_rows(np.diff(p, axis=0), axis=1))])
+    if s[-1] == 0:
+        return np.repeat(p[:1], n, axis=0)
+    q = np.linspace(0.0, s[-1], n)
+    out = np.stack([np.interp(q, s, p[:, i]) for i in range(3)], 1)
+    out[0], out[-1] = p[0], p[-1]
+    return out
 
 
 def explicit_plane(spec, tol: float = 1e-9):
@@ -299,13 +395,16 @@ def explicit_plane(spec, tol: float = 1e-9):
 
 @dataclass(frozen=True)
 class Layout:
-    """A validated layout: ``wings`` (:class:`WingLayout`), ``explicit`` members
-    (:class:`ExplicitMember`, the file's ``members`` list) and the default ``up``.
+    """A validated layout: ``wings`` (:class:`WingLayout`, wings given by their corners),
+    ``explicit`` members (:class:`ExplicitMember`, the file's ``members`` list), the default
+    ``up`` and ``station_wings`` (:class:`StationWing`, wings given by their span axis and
+    stations, measured from the skin: :func:`~shellmesh_mdao.layout.wingbox.resolve_layout`).
     :meth:`members` gives the resolved :class:`MemberSpec` list."""
 
     wings: tuple = ()
     explicit: tuple = ()
     up: Vec | None = None
+    station_wings: tuple = ()
 
     # ------------------------------------------------------------ resolution
     def wing(self, name: str) -> WingLayout:
@@ -329,6 +428,12 @@ class Layout:
         out = []
         for w in self.wings:
             out.extend(_wing_members(w, self.wing_up(w)))
+        for w in self.station_wings:
+            if not w.resolved:
+                raise LayoutError(f"wing '{w.name}' is given by its stations: its members are known once its planform "
+                                  "is measured from the skin; resolve the layout against the surface first "
+                                  "(shellmesh_mdao.layout.resolve_layout, which the pipeline's layout stage runs)")
+            out.extend(w.specs)
         for i, m in enumerate(self.explicit):
             out.append(MemberSpec(
                 name=m.name, kind="explicit", wing=None, index=i,
@@ -337,7 +442,22 @@ class Layout:
         return out
 
     def member_names(self) -> list:
-        return [m.name for m in self.members()]
+        """Names of the members, in :meth:`members` order; for a station-given wing not yet
+        resolved, the names it will have (:meth:`StationWing.predicted_names`)."""
+        if all(w.resolved for w in self.station_wings):
+            return [m.name for m in self.members()]
+        out = []
+        for w in self.wings:
+            out.extend(m.name for m in _wing_members(w, self.wing_up(w)))
+        for w in self.station_wings:
+            out.extend(m.name for m in w.specs) if w.resolved else out.extend(w.predicted_names())
+        out.extend(m.name for m in self.explicit)
+        return out
+
+    @property
+    def all_wing_names(self) -> list:
+        """Names of every wing, corner-given then station-given."""
+        return [w.name for w in self.wings] + [w.name for w in self.station_wings]
 
     # ------------------------------------------------------------ checks
     def validate(self, size: float | None = None) -> "Layout":
@@ -347,7 +467,7 @@ class Layout:
         bad ``size``)."""
         for w in self.wings:
             _check_wing_geometry(w, self.wing_up(w))
-        names = [m.name for m in self.members()]
+        names = self.member_names()
         seen = set()
         for n in names:
             if n in seen:
@@ -406,6 +526,7 @@ class Layout:
             if w.spar_chord:
                 wd["spars"] = {"chord_fractions": list(w.spar_chord)}
             wings.append(wd)
+        wings.extend(_station_wing_dict(w) for w in self.station_wings)
         d["wings"] = wings
         mem = []
         for m in self.explicit:
@@ -619,6 +740,178 @@ def _parse_wing(d, i) -> WingLayout:
     return WingLayout(name=name, up=up, rib_eta=rib_eta, spar_chord=spar_chord, rib_count=rib_count, **pts)
 
 
+def _axis(x, where) -> Vec:
+    """A span axis: 'x', 'y', 'z' (optionally signed, '-y') or a vector."""
+    if isinstance(x, str):
+        t = x.strip().lower()
+        sign = -1.0 if t.startswith("-") else 1.0
+        t = t.lstrip("+-")
+        if t not in ("x", "y", "z"):
+            raise LayoutError(f"{where} = {x!r}: give 'x', 'y' or 'z' (optionally '-y'), or a vector [x, y, z]")
+        v = [0.0, 0.0, 0.0]
+        v["xyz".index(t)] = sign
+        return tuple(v)
+    v = _vec3(x, where)
+    if np.linalg.norm(v) == 0:
+        raise LayoutError(f"{where} is the zero vector: give the span direction, e.g. 'y' or [0, 1, 0]")
+    return v
+
+
+def _fraction_lists(s, where, n):
+    """The optional tip and crank chord fractions of a station-given wing's spars."""
+    tip = cranks = None
+    if s.get("tip_chord_fractions") is not None:
+        tip = _number_list(s["tip_chord_fractions"], f"{where}.tip_chord_fractions")
+        if len(tip) != n:
+            raise LayoutError(f"{where}.tip_chord_fractions has {len(tip)} entries but chord_fractions has {n}: "
+                              "give one tip fraction per spar")
+        _check_chord(tip, f"{where}.tip_chord_fractions")
+    if s.get("crank_chord_fractions") is not None:
+        if tip is None:
+            raise LayoutError(f"{where} has crank_chord_fractions without tip_chord_fractions: give the tip "
+                              "fractions too (the fractions run root -> cranks -> tip)")
+        c = s["crank_chord_fractions"]
+        if not isinstance(c, (list, tuple)):
+            raise LayoutError(f"{where}.crank_chord_fractions must be a list (one list of fractions per crank)")
+        cranks = tuple(_number_list(v, f"{where}.crank_chord_fractions[{i}]") for i, v in enumerate(c))
+        for i, v in enumerate(cranks):
+            if len(v) != n:
+                raise LayoutError(f"{where}.crank_chord_fractions[{i}] has {len(v)} entries but chord_fractions "
+                                  f"has {n}: give one fraction per spar")
+            _check_chord(v, f"{where}.crank_chord_fractions[{i}]")
+    return tip, cranks
+
+
+def _parse_station_wing(d, i, where) -> StationWing:
+    """A wing given by its span axis and stations (``docs/layout.md``, 'Station-given wing')."""
+    _check_keys(d, _STATION_KEYS, _STATION_REQUIRED, where)
+    name = _name(d["name"], f"{where}.name")
+    axis = _axis(d["axis"], f"{where}.axis")
+    root = _number(d["root"], f"{where}.root")
+    tip = _number(d["tip"], f"{where}.tip")
+    if root == tip:
+        raise LayoutError(f"{where}: root and tip are both {root:g}: give the root and tip stations (coordinates "
+                          "along the axis) at different places")
+    cranks = ()
+    if d.get("cranks") is not None:
+        cranks = _number_list(d["cranks"], f"{where}.cranks")
+        sgn = 1.0 if tip > root else -1.0
+        for k, c in enumerate(cranks):
+            if not (root < c < tip or tip < c < root):
+                raise LayoutError(f"{where}.cranks[{k}] = {c:g} is not between the root ({root:g}) and the tip "
+                                  f"({tip:g}): a crank station lies inside the wing")
+            if k and (c - cranks[k - 1]) * sgn <= 0:
+                raise LayoutError(f"{where}.cranks[{k}] = {c:g} is not further from the root than "
+                                  f"{cranks[k - 1]:g}: list the cranks from the root to the tip")
+    hints = {}
+    for k, what in (("up", "the chord-plane normal, e.g. [0, 0, 1]"), ("aft", "a direction from the leading to "
+                    "the trailing edge, e.g. [1, 0, 0]")):
+        if d.get(k) is not None:
+            v = _vec3(d[k], f"{where}.{k}")
+            if np.linalg.norm(v) == 0:
+                raise LayoutError(f"{where}.{k} is the zero vector: give {what}")
+            hints[k] = v
+    near = _vec3(d["near"], f"{where}.near") if d.get("near") is not None else None
+    rib_eta, rib_count, orient, rib_spar, end_ribs = (), None, "normal_to_spar", None, "station"
+    if d.get("ribs") is not None:
+        r = d["ribs"]
+        _check_keys(r, _STATION_RIB_KEYS, (), f"{where}.ribs")
+        if ("count" in r) == ("eta" in r):
+            raise LayoutError(f"{where}.ribs needs exactly one of 'count' (N evenly spaced stations) or 'eta' "
+                              "(list of span fractions in [0, 1])")
+        if "count" in r:
+            n = r["count"]
+            if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+                raise LayoutError(f"{where}.ribs.count must be an integer, got {type(n).__name__} {n!r}")
+            if n < 2 or n > MAX_RIBS:
+                raise LayoutError(f"{where}.ribs.count = {n}: give at least 2 (the root and tip ribs) and at most "
+                                  f"{MAX_RIBS}")
+            rib_count = int(n)
+            rib_eta = tuple(float(v) for v in np.linspace(0.0, 1.0, rib_count))
+        else:
+            rib_eta = _number_list(r["eta"], f"{where}.ribs.eta")
+            _check_eta(rib_eta, f"{where}.ribs.eta")
+        if r.get("orientation") is not None:
+            o = r["orientation"]
+            if isinstance(o, str):
+                if o not in RIB_ORIENTATIONS:
+                    close = difflib.get_close_matches(o, RIB_ORIENTATIONS, n=1, cutoff=0.5)
+                    hint = f"did you mean '{close[0]}'?" if close else f"give one of {', '.join(RIB_ORIENTATIONS)}"
+                    raise LayoutError(f"{where}.ribs.orientation = {o!r} is not an orientation: {hint}, or a vector "
+                                      "(the normal of the rib planes)")
+                orient = o
+            else:
+                orient = _vec3(o, f"{where}.ribs.orientation")
+                if np.linalg.norm(orient) == 0:
+                    raise LayoutError(f"{where}.ribs.orientation is the zero vector: give the rib planes' normal")
+        if r.get("spar") is not None:
+            sp = r["spar"]
+            if isinstance(sp, bool) or not isinstance(sp, (int, np.integer)):
+                raise LayoutError(f"{where}.ribs.spar must be a spar number (0 = the front spar), got {sp!r}")
+            rib_spar = int(sp)
+        if r.get("end_ribs") is not None:
+            if r["end_ribs"] not in END_RIBS:
+                raise LayoutError(f"{where}.ribs.end_ribs = {r['end_ribs']!r}: give 'station' (the root and tip ribs "
+                                  "lie along their stations) or 'same' (they take the ribs' orientation)")
+            end_ribs = r["end_ribs"]
+    spar_chord, tip_c, crank_c = (), None, None
+    if d.get("spars") is not None:
+        s = d["spars"]
+        _check_keys(s, _STATION_SPAR_KEYS, ("chord_fractions",), f"{where}.spars")
+        spar_chord = _number_list(s["chord_fractions"], f"{where}.spars.chord_fractions")
+        _check_chord(spar_chord, f"{where}.spars.chord_fractions")
+        tip_c, crank_c = _fraction_lists(s, f"{where}.spars", len(spar_chord))
+        if crank_c is not None and len(crank_c) != len(cranks):
+            raise LayoutError(f"{where}.spars.crank_chord_fractions has {len(crank_c)} lists but the wing has "
+                              f"{len(cranks)} crank(s): give one list per crank")
+    if rib_spar is not None and not (0 <= rib_spar < len(spar_chord)):
+        raise LayoutError(f"{where}.ribs.spar = {rib_spar}: the wing has {len(spar_chord)} spar(s) (numbered from 0 "
+                          "at the leading edge)")
+    return StationWing(name=name, axis=axis, root=root, tip=tip, cranks=cranks, up=hints.get("up"), near=near,
+                       aft=hints.get("aft"), rib_eta=rib_eta, rib_count=rib_count, rib_orientation=orient,
+                       rib_spar=rib_spar, end_ribs=end_ribs, spar_chord=spar_chord, spar_chord_tip=tip_c,
+                       spar_chord_cranks=crank_c)
+
+
+def _station_wing_dict(w: StationWing) -> dict:
+    """The file form of a station-given wing (what :func:`_parse_station_wing` reads back)."""
+    wd = {"name": w.name, "axis": list(w.axis), "root": w.root, "tip": w.tip}
+    if w.cranks:
+        wd["cranks"] = list(w.cranks)
+    for k in ("up", "near", "aft"):
+        if getattr(w, k) is not None:
+            wd[k] = list(getattr(w, k))
+    if w.rib_eta:
+        r = {"count": int(w.rib_count)} if w.rib_count is not None else {"eta": list(w.rib_eta)}
+        r["orientation"] = w.rib_orientation if isinstance(w.rib_orientation, str) else list(w.rib_orientation)
+        if w.rib_spar is not None:
+            r["spar"] = int(w.rib_spar)
+        r["end_ribs"] = w.end_ribs
+        wd["ribs"] = r
+    if w.spar_chord:
+        s = {"chord_fractions": list(w.spar_chord)}
+        if w.spar_chord_tip is not None:
+            s["tip_chord_fractions"] = list(w.spar_chord_tip)
+        if w.spar_chord_cranks is not None:
+            s["crank_chord_fractions"] = [list(v) for v in w.spar_chord_cranks]
+        wd["spars"] = s
+    return wd
+
+
+def _parse_any_wing(d, i):
+    """A corner-given (:class:`WingLayout`) or station-given (:class:`StationWing`) wing entry."""
+    where = f"wings[{i}]"
+    if isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"].strip():
+        where = f"wings[{i}] ('{d['name']}')"
+    if isinstance(d, dict) and any(k in d for k in ("axis", "root", "tip")):
+        corner = [k for k in ("root_le", "root_te", "tip_le", "tip_te") if k in d]
+        if corner:
+            raise LayoutError(f"{where} has both wing-box corners ({', '.join(corner)}) and stations (axis/root/tip): "
+                              "give the corners or the stations, not both")
+        return _parse_station_wing(d, i, where)
+    return _parse_wing(d, i)
+
+
 def _parse_polyline(x, where) -> tuple:
     if isinstance(x, np.ndarray):
         x = x.tolist()
@@ -713,14 +1006,16 @@ def load_layout(source) -> Layout:
         raise LayoutError(f"'members' must be a list of member entries, got {type(members_in).__name__}")
     if not wings_in and not members_in:
         raise LayoutError("the layout has no wings and no members: add a 'wings' or 'members' list")
-    wings = tuple(_parse_wing(w, i) for i, w in enumerate(wings_in))
+    parsed = [_parse_any_wing(w, i) for i, w in enumerate(wings_in)]
     seen = {}
-    for i, w in enumerate(wings):
+    for i, w in enumerate(parsed):
         if w.name in seen:
             raise LayoutError(f"duplicate wing name '{w.name}' (wings[{seen[w.name]}] and wings[{i}]): rename one")
         seen[w.name] = i
+    wings = tuple(w for w in parsed if isinstance(w, WingLayout))
+    stations = tuple(w for w in parsed if isinstance(w, StationWing))
     members = tuple(_parse_member(m, i) for i, m in enumerate(members_in))
-    return Layout(wings=wings, explicit=members, up=up).validate()
+    return Layout(wings=wings, explicit=members, up=up, station_wings=stations).validate()
 
 
 def layout_from_manifest(manifest: dict, geometry_name: str, ribs=10, spars=(0.15, 0.65)) -> Layout:
