@@ -139,13 +139,18 @@ def test_normal_to_spar_fans_out_at_the_root_of_a_swept_wing():
 
 def test_crank_kinks_the_spars(wing):
     S = naca_wing(crank=(0.4, 1.3), sweep_deg=20.0)
+    # a rib meets the spar 0.04 from the crank: the kink moves to a station a size from it
     lay = resolve(S, layout(cranks=[2.4], ribs={"count": 6}))
+    kink = by_name(lay)["w/spar_1/part_0"].end @ [0, 1, 0]
+    assert kink != pytest.approx(2.4, abs=1e-6) and kink == pytest.approx(2.4, abs=2 * SIZE)
+    lay = resolve(S, layout(cranks=[2.4], ribs={"count": 5}))           # no rib near the crank
     names = [m.name for m in lay.members()]
     assert "w/spar_1/part_0" in names and "w/spar_1/part_1" in names and "w/spar_1" not in names
     m = by_name(lay)
     a, b = m["w/spar_1/part_0"], m["w/spar_1/part_1"]
-    assert a.end @ [0, 1, 0] == pytest.approx(2.4, abs=SIZE + 1e-9)       # the kink near the crank
+    assert a.end @ [0, 1, 0] == pytest.approx(2.4, abs=1e-9)             # the kink at the crank
     assert np.linalg.norm(a.end - b.start) < 1e-9 * 10
+    assert b.bounds[0] == "w/spar_1/part_0" and a.bounds[1] == "w/spar_1/part_1"
     assert np.cross(a.plane_normal, b.plane_normal) @ [0, 0, 1] != pytest.approx(0.0, abs=1e-3)
     # both pieces at 65 % of the local chord at their ends
     pf = lay.station_wings[0].planform
