@@ -201,3 +201,26 @@ def test_station_wing_end_to_end(wing):
     assert {"w/spar_0", "w/spar_1", "w/rib_0", "w/rib_5"} <= names
     assert r.report["wings"]["w"]["root"] == pytest.approx(0.2)
     assert r.report["inputs"]["layout"]["wings"][0]["root"] == 0.2
+
+
+def test_fin_and_fractions_along_the_span(wing):
+    """A vertical fin (span along z, up lateral) is a wing like any other; spar fractions may vary
+    from the root to the tip."""
+    from shellmesh_mdao.mesh import ShellMesh
+
+    P = wing.points[:, [0, 2, 1]] * [1, -1, 1]                           # turned about x: span along z
+    fin = ShellMesh(P, wing.faces, wing.component, ["skin"])
+    d = {"wings": [{"name": "fin", "axis": "z", "root": 0.3, "tip": 5.5, "up": [0, 1, 0],
+                    "ribs": {"count": 5, "orientation": "streamwise"},
+                    "spars": {"chord_fractions": [0.15, 0.65], "tip_chord_fractions": [0.25, 0.6]}}]}
+    lay = resolve(fin, d)
+    pf = lay.station_wings[0].planform
+    assert abs(pf.up @ [0, 1, 0]) == pytest.approx(1.0)
+    m = by_name(lay)
+    for k in range(5):
+        assert abs(m[f"fin/rib_{k}"].plane_normal @ [0, 0, 1]) == pytest.approx(1.0)
+    for name, (c0, c1) in (("fin/spar_0", (0.15, 0.25)), ("fin/spar_1", (0.65, 0.6))):
+        s = m[name]
+        for p, c in ((s.start, c0), (s.end, c1)):
+            t = p @ pf.axis
+            assert pf.chord_fraction_at(t, pf.x_of(p)) == pytest.approx(c, abs=SPAR_TOL * SIZE / pf.chord(t))
