@@ -376,9 +376,9 @@ def test_doc_examples_load(tmp_path):
 
 def test_doc_lists_every_key():
     text = DOC.read_text(encoding="utf-8")
-    from shellmesh_mdao.layout import schema as L
-    for k in (L._TOP_KEYS + L._WING_KEYS + L._RIB_KEYS + L._SPAR_KEYS + L._MEMBER_KEYS + L._STATION_KEYS
-              + L._STATION_RIB_KEYS + L._STATION_SPAR_KEYS + L.RIB_ORIENTATIONS + L.END_RIBS):
+    from shellmesh_mdao.layout import schema as L, stations as S
+    for k in (L._TOP_KEYS + L._WING_KEYS + L._RIB_KEYS + L._SPAR_KEYS + L._MEMBER_KEYS + S._STATION_KEYS
+              + S._STATION_RIB_KEYS + S._STATION_SPAR_KEYS + S.RIB_ORIENTATIONS + S.END_RIBS):
         assert f"`{k}`" in text or f"`ribs.{k}`" in text or f"`spars.{k}`" in text, k
 
 

@@ -10,7 +10,8 @@ from .schema import (MIN_UP_SPAN_ANGLE_DEG, ExplicitMember, Layout, MemberSpec, 
 from .sections import SectionShape, measure_section, section_loops
 from .planform import Planform, measure_planform
 from .wingbox import resolve_layout, resolve_station_wing
-from .schema import StationWing, resample_polyline, RIB_ORIENTATIONS, END_RIBS
+from .schema import resample_polyline
+from .stations import END_RIBS, RIB_ORIENTATIONS, StationWing
 
 __all__ = ["Layout", "WingLayout", "ExplicitMember", "MemberSpec", "load_layout", "layout_from_manifest",
            "explicit_plane", "MIN_UP_SPAN_ANGLE_DEG", "SectionShape", "measure_section", "section_loops",

@@ -55,7 +55,8 @@ import numpy as np
 
 from ..errors import LayoutError
 from .planform import Planform, measure_planform
-from .schema import Layout, MemberSpec, StationWing
+from .schema import Layout, MemberSpec
+from .stations import StationWing
 
 __all__ = ["resolve_layout", "resolve_station_wing", "PlanformLine", "MIN_WEB_HEIGHT", "MIN_EDGE_ANGLE",
            "SPAR_TOL", "PLANFORM_TOL"]
@@ -326,7 +327,6 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
     pf = measure_planform(points, tris, w.axis, w.root, w.tip, w.cranks, up=w.up if w.up is not None else up,
                           near=w.near, aft=w.aft, tol=PLANFORM_TOL * h, name=w.name)
     box = _Box(w, pf, h)
-    u = pf.up
     notes = []
     spars = list(w.spar_chord)
     # ---------------------------------------------------------------- spar-like members
