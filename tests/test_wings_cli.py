@@ -86,3 +86,20 @@ def test_cli_wings_errors(aircraft, tmp_path, capsys, args, msg):
     assert main([a.format(src=src) for a in args]) == 2
     err = capsys.readouterr().err.strip()
     assert msg in err and len(err.splitlines()) == 1
+
+
+GEOMETRY = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "geometry"
+
+
+@pytest.mark.skipif(not (GEOMETRY / "f22_half.vtk").is_file(), reason="corpus not present")
+def test_root_clear_of_a_wing_body_junction():
+    """The F-22's wing leaves its body along a crease line near y = -2.15: the root rib is put two
+    element sizes outboard of it (not two sizes from where the sections first look like a wing)."""
+    from shellmesh_mdao.load import load_surface
+
+    S, _ = load_surface(GEOMETRY / "f22_half.vtk")
+    for size in (0.17, 0.085):
+        ws = find_wings(S.points, S.faces[:, :3], "y", size=size)
+        wing = max(ws, key=lambda w: w.root_chord)
+        assert wing.tip < wing.root < -2.12 - 2 * size + 0.05
+        assert wing.root_chord > 6.0 and wing.mirror is None

@@ -140,9 +140,8 @@ def summary_counts(results: list) -> dict:
     """``{geometry: {outcome: count}}`` and a ``"total"`` row."""
     out: dict = {}
     for r in results:
-        for key in (r["geometry"], "total"):
-            row = out.setdefault(key, {"ok": 0, "guarantee": 0, "refused": 0, "crash": 0})
-            row[r["outcome"]] += 1
+        out.setdefault(r["geometry"], {"ok": 0, "guarantee": 0, "refused": 0, "crash": 0})[r["outcome"]] += 1
+    out["total"] = {k: sum(row[k] for row in out.values()) for k in ("ok", "guarantee", "refused", "crash")}
     return out
 
 

@@ -23,7 +23,10 @@ sections from station to station:
    other end. With an
    element size ``size`` both are moved inwards so the layout can be meshed at that size: the
    root one size from the symmetry plane (the two halves' root ribs two sizes apart) or two
-   sizes from the track's inboard end (where the wing leaves a body, often in a fillet), the tip at least two sizes inboard
+   sizes from the track's inboard end (where the wing leaves a body) and from the junction
+   line there (the skin's creases, edges whose faces meet at more than :data:`CREASE_DEG` and run
+   across the span, in the root section's extent: the run of element-size station bins near the
+   track's end holding at least :data:`CREASE_EDGES` of them each), the tip at least two sizes inboard
    of the track's end and where the wing is at least :data:`TIP_THICKNESS` sizes thick (a spar
    web must be 0.3 sizes tall: at 15 % or 65 % of the chord a wing is about two thirds of its
    largest thickness). Without ``size``: a hundredth of the surface's span.
@@ -44,7 +47,7 @@ from .planform import WING_LIKE, loop_chord, measure_planform
 from .sections import section_loops
 
 __all__ = ["FoundWing", "find_wings", "starting_layout", "FIND_STATIONS", "MIN_ASPECT", "CHORD_JUMP",
-           "TIP_THICKNESS", "RIB_GAP", "SYMMETRY_TOL", "axis_vector"]
+           "TIP_THICKNESS", "RIB_GAP", "CREASE_DEG", "CREASE_EDGES", "SYMMETRY_TOL", "axis_vector"]
 
 #: planes across the skin's extent along the axis
 FIND_STATIONS = 160
@@ -58,6 +61,11 @@ TIP_THICKNESS = 0.6
 #: with an element size, the starting layout's ribs are at least this many sizes apart (a short
 #: surface, a tail, gets fewer ribs than asked for)
 RIB_GAP = 1.5
+#: a skin edge whose faces meet at more than this angle is a crease (a wing-body junction line near
+#: a wing's root keeps the root rib two element sizes away from it)
+CREASE_DEG = 30.0
+#: an element-size bin of stations with at least this many crease edges is part of a junction line
+CREASE_EDGES = 3
 #: mirror symmetry tolerance (share of the bounding-box diagonal)
 SYMMETRY_TOL = 1e-4
 
@@ -157,6 +165,56 @@ def _tracks(P, T, a, stations):
     return done + tracks
 
 
+def _crease_edges(P, T, a):
+    """Midpoints of the skin's crease edges (faces meeting at more than :data:`CREASE_DEG`) that
+    run across the span (within 60 degrees of the station planes): a wing-body junction, not a
+    sharp leading or trailing edge."""
+    e = np.vstack([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    f = np.tile(np.arange(len(T)), 3)
+    key = np.sort(e, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    k, f = key[order], f[order]
+    same = (k[1:] == k[:-1]).all(1)
+    i = np.flatnonzero(same)
+    n = np.cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]])
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    cosang = np.einsum("ij,ij->i", n[f[i]], n[f[i + 1]])
+    crease = i[cosang < np.cos(np.radians(CREASE_DEG))]
+    ek = k[crease]
+    d = P[ek[:, 1]] - P[ek[:, 0]]
+    across = np.abs(d @ a) <= np.cos(np.radians(30.0)) * np.linalg.norm(d, axis=1)
+    return 0.5 * (P[ek[across, 0]] + P[ek[across, 1]])
+
+
+def _root_creases(P, T, a, piece, sgn, creases, h):
+    """Where the junction line at the root of a wing ends (towards the tip): the crease edges
+    inside the root section's extent, binned by station in steps of ``h`` from two steps
+    inboard of the track's root end; the outermost station of the run of bins holding at least
+    :data:`CREASE_EDGES` such edges each (a line across the chord, not a stray facet edge) that
+    starts within the first five bins; None when there is none."""
+    if not len(creases):
+        return None
+    t0, lp, L = piece[0][1], piece[0][2], piece[0][3]
+    t = creases @ a
+    lo, hi = lp.min(0) - 0.05 * L, lp.max(0) + 0.05 * L
+    q = creases - np.outer(t, a)
+    lo, hi = lo - (lo @ a) * a, hi - (hi @ a) * a
+    inside = ((q >= np.minimum(lo, hi) - 1e-12) & (q <= np.maximum(lo, hi) + 1e-12)).all(1)
+    r = (t[inside] - t0) * sgn + 2.0 * h               # distance from two steps inboard of the end
+    r = r[r >= 0]
+    if not len(r):
+        return None
+    cnt = np.bincount((r / h).astype(np.int64))
+    full = np.flatnonzero(cnt[:5] >= CREASE_EDGES)        # the run starts within three steps of the end
+    if not len(full):
+        return None
+    k = int(full[0])
+    while k < len(cnt) and cnt[k] >= CREASE_EDGES:
+        k += 1
+    last = r[(r / h).astype(np.int64) < k].max()
+    return float(t0 + sgn * (last - 2.0 * h))
+
+
 def find_wings(points, tris, axis="y", size: float | None = None) -> list:
     """The lifting surfaces of the skin ``(points, tris)`` along ``axis`` ('x', 'y', 'z' or a
     vector), their stations fitted to the element ``size`` (module docstring), largest first.
@@ -184,6 +242,7 @@ def find_wings(points, tris, axis="y", size: float | None = None) -> list:
                           f"{WING_LIKE:g} as thick as long) follow each other over {MIN_ASPECT:g} chords; try another "
                           "--axis (the span direction: y for most aircraft, z for a fin)")
     mirror = _mirror_plane(P, a, diag)
+    creases = _crease_edges(P, T, a)
     parts = []                                        # (track piece, root end first)
     for tr in surfaces:
         t0, t1 = tr[0][1], tr[-1][1]
@@ -204,6 +263,10 @@ def find_wings(points, tris, axis="y", size: float | None = None) -> list:
         start = plane if at_mirror else ta - sgn * 0.5 * step
         end = tb + sgn * 0.5 * step
         root = (plane + sgn * h) if at_mirror else (start + sgn * 2.0 * h)
+        if not at_mirror:                             # clear of the junction's creases
+            crease = _root_creases(P, T, a, piece, sgn, creases, h)
+            if crease is not None and (crease + sgn * 2.0 * h - root) * sgn > 0:
+                root = crease + sgn * 2.0 * h
         # the tip: two sizes inboard of the end, where the wing is at least one size thick
         tip = end - sgn * 2.0 * h
         thick = [(it[1], it[4]) for it in piece]
