@@ -4,6 +4,8 @@
     python run_scripts/real_wings.py --only bwb cessna210 --divisors 40
     python run_scripts/real_wings.py --from-json docs/real_wings.json   # re-render the page
 
+(``--from-json`` also renders the list of lines ``meta.findings`` of the JSON as a "Findings" section.)
+
 The matrix and its classification (ok / guarantee / refused / crash) are the package's
 :mod:`shellmesh_mdao.benchmarks.real_wings`; this script runs each case in its own child process
 with a time limit and writes docs/real_wings.md (rewritten after every case) and
