@@ -1,7 +1,7 @@
 """The ``shellmesh`` command line.
 
-Commands: ``info`` (describe a surface), ``mesh`` (run the pipeline from flags or a study
-config file), ``demo`` (the bundled default wing end to end), ``render`` (off-screen pictures
+Commands: ``info`` (describe a surface), ``wings`` (its lifting surfaces and a starting
+layout given by stations), ``mesh`` (run the pipeline from flags or a study config file), ``demo`` (the bundled default wing end to end), ``render`` (off-screen pictures
 of a mesh), ``quality`` (element quality tables, per component, flagged elements) and
 ``report`` (the HTML/Markdown report of an existing mesh file). The reference is
 ``docs/cli.md``.
@@ -236,6 +236,65 @@ def _cmd_demo(args) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- wings
+def _cmd_wings(args) -> int:
+    """Find the lifting surfaces of a surface and write a starting layout for them."""
+    from .export import write_text_atomic
+    from .layout.finder import find_wings, starting_layout
+    from .load import load_surface
+    from .study import display_path, status
+
+    size = None
+    if args.size is not None:
+        try:
+            size = float(args.size)
+            if not size > 0 or size != size or size == float("inf"):
+                raise ValueError
+        except ValueError:
+            raise _UsageError(f"--size {args.size!r}: give a positive length (the target quad edge length)") from None
+    try:
+        spars = [float(v) for v in args.spars.split(",")] if args.spars.strip() else []
+    except ValueError:
+        raise _UsageError(f"--spars {args.spars!r}: give chord fractions separated by commas, e.g. 0.15,0.65") from None
+    if args.ribs < 2:
+        raise _UsageError(f"--ribs {args.ribs}: give at least 2 (the root and tip ribs)")
+    out = Path(args.out) if args.out else None
+    if out is not None and out.suffix.lower() not in (".yaml", ".yml", ".json"):
+        raise _UsageError(f"--out {out.name}: a layout is a .yaml, .yml or .json file")
+    mesh, _ = load_surface(args.surface)
+    with status("finding lifting surfaces ...", args.quiet):
+        wings = find_wings(mesh.points, mesh.faces[:, :3], args.axis, size=size)
+    layout = starting_layout(wings, ribs=args.ribs, spars=spars, orientation=args.orientation)
+    if args.json:
+        print(json.dumps({"wings": [{"name": w.name, "root": w.root, "tip": w.tip, "extent": [w.start, w.end],
+                                     "root_chord": w.root_chord, "tip_chord": w.tip_chord,
+                                     "max_thickness": w.max_thickness, "up": w.up.tolist(),
+                                     "near": w.near.tolist(), "mirror": w.mirror} for w in wings],
+                          "layout": layout}, indent=2))
+    elif not args.quiet:
+        print(f"{len(wings)} lifting surface(s) along {args.axis}" + (f", stations fitted to size {size:g}"
+                                                                     if size is not None else ""))
+        head = ("name", "root", "tip", "extent", "root chord", "tip chord", "max thickness", "mirror")
+        rows = [(w.name, f"{w.root:.6g}", f"{w.tip:.6g}", f"{w.start:.4g} .. {w.end:.4g}", f"{w.root_chord:.4g}",
+                 f"{w.tip_chord:.4g}", f"{w.max_thickness:.4g}", w.mirror or "-") for w in wings]
+        wd = [max(len(str(r[i])) for r in [head] + rows) for i in range(len(head))]
+        for r in [head] + rows:
+            print("  " + "  ".join(str(c).ljust(wd[i]) for i, c in enumerate(r)))
+    if out is not None:
+        if out.suffix.lower() == ".json":
+            text = json.dumps(layout, indent=2) + "\n"
+        else:
+            import yaml
+
+            text = ("# starting layout written by 'shellmesh wings' (docs/layout.md, 'Station-given wing');\n"
+                    "# edit the ribs, spars and stations, then: shellmesh mesh SURFACE --layout THIS --size H\n"
+                    + yaml.safe_dump(layout, sort_keys=False, default_flow_style=None))
+        write_text_atomic(out, text)
+        if not args.quiet:
+            print(f"wrote {display_path(out)}")
+    return 0
+
+
 # ----------------------------------------------------------------------------- render, report
 def _window(text: str):
     try:
@@ -374,6 +433,26 @@ def build_parser() -> argparse.ArgumentParser:
     pd.add_argument("--size", default=0.1, type=float, help="target quad edge length in metres (default 0.1)")
     pd.add_argument("--no-pictures", action="store_true", help="no rendered pictures in the report")
     pd.set_defaults(func=_cmd_demo)
+
+    pw = sub.add_parser("wings", parents=[common],
+                        help="find the lifting surfaces of a surface (station range, chords, thickness) and write "
+                             "a starting layout given by stations",
+                        description="Slice the surface along the span axis, find its thin elongated sections "
+                                    "(wings, tails; a fin with --axis z) and print their station range, root and tip "
+                                    "chord and thickness; --out writes a starting layout (docs/layout.md, "
+                                    "'Station-given wing'). See docs/cli.md.")
+    pw.add_argument("surface", help="surface file (.stl .obj .ply .vtk .msh .step .iges ...)")
+    pw.add_argument("--axis", default="y", help="span axis: x, y or z (default y; z for a fin)")
+    pw.add_argument("--size", help="element size the layout is for: the stations keep the ribs and spars meshable "
+                                   "at it (default: a hundredth of each surface's span)")
+    pw.add_argument("--out", help="starting layout to write (.yaml or .json)")
+    pw.add_argument("--ribs", type=int, default=10, help="ribs per wing in the starting layout (default 10)")
+    pw.add_argument("--spars", default="0.15,0.65", help="spar chord fractions (default 0.15,0.65)")
+    pw.add_argument("--orientation", default="normal_to_spar",
+                    choices=("normal_to_spar", "streamwise", "normal_to_midchord"),
+                    help="rib orientation in the starting layout (default normal_to_spar)")
+    pw.add_argument("--json", action="store_true", help="print one JSON object (the surfaces and the layout)")
+    pw.set_defaults(func=_cmd_wings)
 
     pr = sub.add_parser("render", parents=[common], help="draw a mesh off-screen into a PNG")
     pr.add_argument("meshfile", help="mesh file (.vtu .msh .bdf .nas .inp) or surface file (.stl .obj ...)")

@@ -27,7 +27,7 @@ file without any groups is one component ``skin``.
 :func:`parse_component` reads a name of the scheme back into a :class:`ComponentName` (kind,
 wing, index, side, segment); :func:`member_of` strips a segment. :func:`component_family`
 gives the family a name belongs to -- ``'skin'``, ``'upper skin'``, ``'lower skin'``, ``'rib'``,
-``'spar'`` or ``'member'`` (:data:`FAMILIES`) -- for any name, also names from a file: it is
+``'spar'`` (spars, their pieces and the edge webs) or ``'member'`` (:data:`FAMILIES`) -- for any name, also names from a file: it is
 what the pictures colour by, the report counts by and a config ``thickness`` mapping may name
 (:data:`THICKNESS_FAMILIES`).
 """
@@ -40,7 +40,7 @@ from .errors import LayoutError
 
 __all__ = [
     "SKIN", "SIDES", "KINDS", "FAMILIES", "BOX_FAMILIES", "THICKNESS_FAMILIES", "LOWER_SKIN_PATTERN",
-    "ROOT_RIB_PATTERN", "ComponentName", "rib_name", "spar_name", "bay_name",
+    "ROOT_RIB_PATTERN", "WEB_EDGES", "ComponentName", "rib_name", "spar_name", "spar_part_name", "part_name", "web_name", "bay_name",
     "segment_name", "unnamed_name", "physical_group_name", "padded_names", "name_of", "check_plain_name", "parse_component",
     "member_of", "is_piece_of", "is_member", "name_head", "name_and_parents", "component_family", "is_skin",
     "is_skin_bay", "is_lower_skin_bay", "is_upper_skin_bay", "is_rib_or_spar",
@@ -51,7 +51,9 @@ SKIN = "skin"
 #: The skin sides of a bay, as in ``<wing>/<side>_skin/bay_<k>``.
 SIDES = ("upper", "lower")
 #: ``ComponentName.kind`` values.
-KINDS = ("skin", "rib", "spar", "explicit", "skin_bay")
+KINDS = ("skin", "rib", "spar", "web", "explicit", "skin_bay")
+#: The edges an edge web runs along (:func:`web_name`).
+WEB_EDGES = ("le", "te")
 #: The component families (:func:`component_family`), in the order the report lists them.
 FAMILIES = ("skin", "upper skin", "lower skin", "rib", "spar", "member")
 #: The families of a wing box: its skin bays, ribs and spars.
@@ -70,12 +72,15 @@ _PLAIN = r"([^/]+)"
 _SCHEME = (
     ("rib", re.compile(rf"^{_PLAIN}/rib_{_INDEX}(?:/seg_{_INDEX})?$")),
     ("spar", re.compile(rf"^{_PLAIN}/spar_{_INDEX}(?:/seg_{_INDEX})?$")),
+    ("spar_part", re.compile(rf"^{_PLAIN}/spar_{_INDEX}/part_{_INDEX}(?:/seg_{_INDEX})?$")),
+    ("web", re.compile(rf"^{_PLAIN}/(le|te)_web(?:/seg_{_INDEX})?$")),
     ("skin_bay", re.compile(rf"^{_PLAIN}/(upper|lower)_skin/bay_{_INDEX}$")),
     ("explicit", re.compile(rf"^{_PLAIN}/seg_{_INDEX}$")),
 )
 # component_family: a part "rib", "rib_<digits>", "spar", "spar_<digits>"
 _RIB = re.compile(r"^rib(_\d+)?$")
 _SPAR = re.compile(r"^spar(_\d+)?$")
+_WEB = re.compile(r"^(le|te)_web$")
 
 
 @dataclass(frozen=True)
@@ -83,11 +88,12 @@ class ComponentName:
     """A component name of the scheme, read by :func:`parse_component`.
 
     ``name``     the name itself.
-    ``kind``     ``'skin'``, ``'rib'``, ``'spar'``, ``'explicit'`` or ``'skin_bay'``.
+    ``kind``     ``'skin'``, ``'rib'``, ``'spar'``, ``'web'``, ``'explicit'`` or ``'skin_bay'``.
     ``wing``     the wing of a rib, spar or bay; None for the skin and explicit members.
     ``index``    rib ``k``, spar ``j`` or bay ``k``; None for the skin and explicit members.
-    ``side``     ``'upper'`` or ``'lower'`` for a bay, else None.
+    ``side``     ``'upper'`` or ``'lower'`` for a bay, ``'le'`` or ``'te'`` for an edge web, else None.
     ``segment``  ``j`` of a member piece ``<member>/seg_<j>``, else None.
+    ``part``     ``p`` of a spar piece ``<wing>/spar_<j>/part_<p>``, else None.
     """
 
     name: str
@@ -96,11 +102,12 @@ class ComponentName:
     index: int | None = None
     side: str | None = None
     segment: int | None = None
+    part: int | None = None
 
     @property
     def member(self) -> str | None:
         """The member's name (without the segment) for a rib, spar or explicit member, else None."""
-        return member_of(self.name) if self.kind in ("rib", "spar", "explicit") else None
+        return member_of(self.name) if self.kind in ("rib", "spar", "web", "explicit") else None
 
     @property
     def family(self) -> str:
@@ -117,6 +124,23 @@ def rib_name(wing: str, k: int) -> str:
 def spar_name(wing: str, j: int) -> str:
     """``<wing>/spar_<j>``: spar ``j`` of ``wing`` (0 at the leading edge)."""
     return f"{wing}/spar_{j}"
+
+
+def spar_part_name(wing: str, j: int, p: int) -> str:
+    """``<wing>/spar_<j>/part_<p>``: planar piece ``p`` (0 at the root) of a kinked spar ``j``."""
+    return part_name(spar_name(wing, j), p)
+
+
+def part_name(member: str, p: int) -> str:
+    """``<member>/part_<p>``: planar piece ``p`` of a kinked member of a station-given wing."""
+    return f"{member}/part_{p}"
+
+
+def web_name(wing: str, edge: str) -> str:
+    """``<wing>/<edge>_web``: the web along the leading (``edge='le'``) or trailing (``'te'``) edge."""
+    if edge not in WEB_EDGES:
+        raise ValueError(f"web edge must be one of {WEB_EDGES}, got {edge!r}")
+    return f"{wing}/{edge}_web"
 
 
 def bay_name(wing: str, side: str, k: int) -> str:
@@ -184,10 +208,16 @@ def parse_component(name: str) -> ComponentName:
             return ComponentName(name, kind, wing=m[1], index=int(m[3]), side=m[2])
         if kind == "explicit":
             return ComponentName(name, kind, segment=int(m[2]))
+        if kind == "spar_part":
+            return ComponentName(name, "spar", wing=m[1], index=int(m[2]), part=int(m[3]),
+                                 segment=None if m[4] is None else int(m[4]))
+        if kind == "web":
+            return ComponentName(name, kind, wing=m[1], side=m[2], segment=None if m[3] is None else int(m[3]))
         return ComponentName(name, kind, wing=m[1], index=int(m[2]),
                              segment=None if m[3] is None else int(m[3]))
     raise LayoutError(f"component name {name!r} does not follow the naming scheme: '<wing>/rib_<k>', "
-                      "'<wing>/spar_<j>', '<member>/seg_<j>', '<wing>/upper_skin/bay_<k>', "
+                      "'<wing>/spar_<j>', '<wing>/spar_<j>/part_<p>', '<wing>/le_web', '<wing>/te_web', "
+                      "'<member>/seg_<j>', '<wing>/upper_skin/bay_<k>', "
                       "'<wing>/lower_skin/bay_<k>', 'skin' or a name without '/'")
 
 
@@ -247,7 +277,7 @@ def component_family(name: str) -> str:
     for part in parts[1:] or parts:      # "<wing>/rib_3", "<wing>/spar_1/seg_2"
         if _RIB.match(part):
             return "rib"
-        if _SPAR.match(part):
+        if _SPAR.match(part) or _WEB.match(part):
             return "spar"
     if "skin" in parts[-1]:
         return "skin"
@@ -278,7 +308,8 @@ def is_upper_skin_bay(name: str) -> bool:
 
 
 def is_rib_or_spar(name: str) -> bool:
-    """True for a rib or spar of the scheme or one of its pieces (``<wing>/rib_<k>``,
-    ``<wing>/spar_<j>``, ``.../seg_<i>``); False for explicit members and the skin."""
+    """True for a rib, spar or edge web of the scheme or one of its pieces (``<wing>/rib_<k>``,
+    ``<wing>/spar_<j>``, ``<wing>/spar_<j>/part_<p>``, ``<wing>/le_web``, ``.../seg_<i>``); False for
+    explicit members and the skin."""
     p = _parsed(name)
-    return p is not None and p.kind in ("rib", "spar")
+    return p is not None and p.kind in ("rib", "spar", "web")

@@ -65,12 +65,18 @@ def naca_wing(span: float = DEFAULT_WING["span"], root_chord: float = DEFAULT_WI
               tip_chord: float = DEFAULT_WING["tip_chord"], sweep_deg: float = DEFAULT_WING["sweep_deg"],
               dihedral_deg: float = DEFAULT_WING["dihedral_deg"], naca: str = DEFAULT_WING["naca"],
               n_chord: int = DEFAULT_WING["n_chord"], n_span: int = DEFAULT_WING["n_span"],
-              y0: float = 0.0) -> ShellMesh:
+              y0: float = 0.0, twist_deg: float = 0.0, crank=None, te_thickness: float = 0.0) -> ShellMesh:
     """Closed triangulated semi-span wing: x aft, y spanwise from ``y0`` to ``y0 + span``, z up.
 
     Leading-edge sweep ``sweep_deg``, linear taper, dihedral ``dihedral_deg``; ``n_chord``
     points per airfoil side (cosine spaced) and ``n_span`` sections. Faces are oriented
-    with outward normals; one component named ``skin``.
+    with outward normals; one component named ``skin``. Options for tests of measured
+    planforms (all off by default): ``twist_deg`` the tip's twist (linear from 0 at the root;
+    each section turned about its leading edge, positive nose up), ``crank`` a pair
+    ``(span fraction, chord)``: the chord runs linearly from the root to that station and on to
+    the tip (a kink of the trailing edge; a section lies at the crank), ``te_thickness`` a
+    blunt trailing edge of that share of the chord (the sections opened linearly from the
+    leading edge, the base a straight segment).
     """
     for name, v in [("span", span), ("root_chord", root_chord), ("tip_chord", tip_chord)]:
         if not np.isfinite(v) or v <= 0:
@@ -78,14 +84,29 @@ def naca_wing(span: float = DEFAULT_WING["span"], root_chord: float = DEFAULT_WI
     if n_chord < 4 or n_span < 2:
         raise SizeError(f"need n_chord >= 4 and n_span >= 2, got {n_chord}, {n_span}")
     af = naca4(naca, n_chord)                      # (2n, 2), closed loop
+    if te_thickness > 0:                           # lower TE..LE (n+1 points), upper side, upper TE
+        te_z = af[0, 1]
+        sign = np.where(np.arange(len(af)) <= n_chord, -1.0, 1.0)
+        af = af + np.stack([np.zeros(len(af)), 0.5 * te_thickness * af[:, 0] * sign], 1)
+        af = np.vstack([af, [[1.0, te_z + 0.5 * te_thickness]]])
     k = len(af)
     s = np.linspace(0.0, 1.0, n_span)
-    chord = root_chord + (tip_chord - root_chord) * s
+    if crank is not None:
+        s = np.unique(np.concatenate([s, [float(crank[0])]]))
+        chord = np.interp(s, [0.0, float(crank[0]), 1.0], [root_chord, float(crank[1]), tip_chord])
+    else:
+        chord = root_chord + (tip_chord - root_chord) * s
+    n_span = len(s)
     y = y0 + span * s
     x_le = span * s * np.tan(np.radians(sweep_deg))
     z_le = span * s * np.tan(np.radians(dihedral_deg))
     X = x_le[:, None] + chord[:, None] * af[None, :, 0]
     Z = z_le[:, None] + chord[:, None] * af[None, :, 1]
+    if twist_deg != 0:                             # turn each section about its leading edge
+        th = np.radians(twist_deg) * s[:, None]
+        dx, dz = X - x_le[:, None], Z - z_le[:, None]
+        X = x_le[:, None] + dx * np.cos(th) + dz * np.sin(th)
+        Z = z_le[:, None] - dx * np.sin(th) + dz * np.cos(th)
     Y = np.broadcast_to(y[:, None], X.shape)
     pts = np.stack([X, Y, Z], -1).reshape(-1, 3)
     i, j = np.meshgrid(np.arange(n_span - 1), np.arange(k), indexing="ij")

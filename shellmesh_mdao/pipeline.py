@@ -183,12 +183,14 @@ def stage_load(surface, size, options=None) -> PipelineState:
 
 def stage_layout(state: PipelineState, layout) -> PipelineState:
     """Read and validate the member layout (path, dict or :class:`~shellmesh_mdao.layout.Layout`)."""
-    from .layout import load_layout
+    from .layout import load_layout, resolve_layout
 
-    lay = load_layout(layout)
+    lay = resolve_layout(load_layout(layout), state.surface.points, state.surface.faces[:, :3], state.size)
     lay.validate(state.size)
     st = state.but(layout=lay, stage="layout")
     st.report["inputs"]["layout"] = lay.to_dict()
+    if lay.station_wings:                  # wings measured from the skin: their planform and notes
+        st.report["wings"] = {w.name: dict(w.planform.summary(), notes=list(w.notes)) for w in lay.station_wings}
     return st
 
 

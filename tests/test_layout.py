@@ -358,18 +358,44 @@ def test_doc_examples_load(tmp_path):
         p.write_text(b)
         lay = load_layout(p)
         assert lay.wings and lay.members()
+    stations = 0
     for i, b in enumerate(ys):
         p = tmp_path / f"ex{i}.yaml"
         p.write_text(b)
         lay = load_layout(p)
-        assert lay.wings and lay.members()
-    lay = load_layout(yaml.safe_load(ys[0]))
+        if lay.station_wings:                # members known once resolved against the skin
+            stations += 1
+            assert lay.member_names()
+        else:
+            assert lay.wings and lay.members()
+    assert stations == 1
+    lay = load_layout(yaml.safe_load(next(b for b in ys if "# bwb" in b)))
     assert [w.rib_eta for w in lay.wings] == [(0.0, 0.25, 0.5, 0.75, 1.0), (0.0, 0.25, 0.5, 0.75, 1.0)]
     assert "bulkhead_1" in load_layout(json.loads(js[0])).member_names()
 
 
 def test_doc_lists_every_key():
     text = DOC.read_text(encoding="utf-8")
-    from shellmesh_mdao import layout as L
-    for k in L._TOP_KEYS + L._WING_KEYS + L._RIB_KEYS + L._SPAR_KEYS + L._MEMBER_KEYS:
+    from shellmesh_mdao.layout import schema as L, stations as S
+    for k in (L._TOP_KEYS + L._WING_KEYS + L._RIB_KEYS + L._SPAR_KEYS + L._MEMBER_KEYS + S._STATION_KEYS
+              + S._STATION_RIB_KEYS + S._STATION_SPAR_KEYS + S.RIB_ORIENTATIONS + S.END_RIBS):
         assert f"`{k}`" in text or f"`ribs.{k}`" in text or f"`spars.{k}`" in text, k
+
+
+GEOMETRY = Path(__file__).resolve().parents[2] / "shared" / "geometry"
+
+
+@pytest.mark.skipif(not (GEOMETRY / "cessna210.stl").is_file(), reason="corpus not present")
+def test_doc_station_example_resolves_on_the_cessna():
+    """The docs' station-given example is a real layout: resolved against cessna210.stl, the wing and
+    the tail (picked by 'near' where the tail's root plane cuts the wing too) have their members."""
+    from shellmesh_mdao.layout import resolve_layout
+    from shellmesh_mdao.load import load_surface
+
+    block = next(b for b in _doc_blocks("yaml") if "root:" in b)
+    S, _ = load_surface(GEOMETRY / "cessna210.stl")
+    lay = resolve_layout(load_layout(yaml.safe_load(block)), S.points, S.faces[:, :3], 0.25)
+    names = lay.member_names()
+    assert "right_wing/rib_9" in names and "right_tail/rib_4" in names
+    tail = lay.station_wings[1].planform
+    assert tail.shapes[0].le[0] > 20.0 and tail.shapes[0].chord < 4.5       # the tail, not the wing

@@ -12,6 +12,11 @@ Not part of the meshing pipeline; the scripts ``run_scripts/benchmark.py`` and
   (:func:`run_benchmark`); Gmsh is optional (``pip install -e ".[test]"``);
 * :mod:`.page` -- the page docs/benchmarks.md of its figures (:func:`render_page`,
   :func:`write_outputs`);
+* :mod:`.real_wings` -- the real-wings matrix (issue 40): every corpus geometry meshed from the
+  layout ``shellmesh wings`` writes (wings given by stations), three layouts, three rib
+  orientations, two sizes, classified ok / guarantee / refused / crash, and its page
+  docs/real_wings.md (``run_scripts/real_wings.py``; imported as
+  ``shellmesh_mdao.benchmarks.real_wings``);
 * :mod:`.stress` -- the stress sweep: random layouts drawn per seed (:func:`draw_case`), run end
   to end and classified ok / invalid layout / FAIL (:func:`run_case`), with independent checks of
   the layout (:func:`layout_tightness`) and the page docs/stress_layouts.md (:func:`write_page`).

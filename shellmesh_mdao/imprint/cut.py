@@ -489,7 +489,9 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
     ``snap_fallback`` that does not keep the chain's crossing points (an open chain not
     ending at its two crossing vertices, a crossing vertex on its arc left out of it, or a
     branching chain) is redone at ``snap_fallback``: a larger snap can reach skin vertices
-    beside a crossing point, across a thin section. ``ChainResult.snap`` tells which was used.
+    beside a crossing point, across a thin section; one still not keeping them is redone
+    without snapping, and that cut is taken when it keeps them. ``ChainResult.snap`` tells which
+    was used.
 
     Returns ``(mesh, results)``: the imprinted skin (feature edges of each chain tagged with
     the member's component id, chain vertices fixed) and one :class:`ChainResult` per chain.
@@ -607,6 +609,16 @@ def imprint_chains(skin: ShellMesh, surface_points: np.ndarray, surface_tris: np
             if not clean and snap > snap_fallback:
                 cut = cut_chain(P, T, C, spec, arc, movable, on, snap=snap_fallback, end_vertices=endv)
                 used = snap_fallback
+                clean = _keeps_crossings(cut[3], must, endv)
+            if not clean and used > 0:
+                # last resort, no snapping: a vertex snapped beside a chain end can leave both faces of
+                # the chain's last edge on one side of the plane (the chain then stops short of its end)
+                try:
+                    bare = cut_chain(P, T, C, spec, arc, movable, on, snap=0.0, end_vertices=endv)
+                    if _keeps_crossings(bare[3], must, endv):
+                        cut, used = bare, 0.0
+                except ImprintError:
+                    pass
             if endv is not None and not _keeps_crossings(cut[3], np.zeros(0, np.int64), endv):
                 _raise_off_ends(spec, cut[0], cut[3], endv)
         except ImprintError as e:

@@ -34,17 +34,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import LayoutError, SizeError
-from .families import check_plain_name, rib_name, spar_name
-from .mesh import norm_rows
+from ..errors import LayoutError, SizeError
+from ..families import rib_name, spar_name
+from ..mesh import norm_rows
+from .parsing import MAX_RIBS, Vec, check_chord as _check_chord, check_eta as _check_eta, \
+    check_keys as _check_keys, member_name as _name, number_list as _number_list, \
+    unit as _unit, vec3 as _vec3
+from .stations import END_RIBS, RIB_ORIENTATIONS, StationWing, parse_station_wing, station_wing_dict
 
-__all__ = ["Layout", "WingLayout", "ExplicitMember", "MemberSpec", "load_layout", "layout_from_manifest",
-           "explicit_plane", "MIN_UP_SPAN_ANGLE_DEG"]
+__all__ = ["Layout", "WingLayout", "StationWing", "ExplicitMember", "MemberSpec", "load_layout",
+           "layout_from_manifest", "explicit_plane", "resample_polyline", "MIN_UP_SPAN_ANGLE_DEG", "RIB_ORIENTATIONS",
+           "END_RIBS"]
 
 #: ``up`` must make at least this angle with the span line (else the rib normal is undefined).
 MIN_UP_SPAN_ANGLE_DEG = 10.0
-#: Upper bound of ``ribs.count`` (a typo guard: more ribs than this cannot be meshed anyway).
-MAX_RIBS = 10000
 
 _TOP_KEYS = ("wings", "members", "up")
 _WING_KEYS = ("name", "root_le", "root_te", "tip_le", "tip_te", "up", "ribs", "spars")
@@ -54,61 +57,8 @@ _SPAR_KEYS = ("chord_fractions",)
 _MEMBER_KEYS = ("name", "upper", "lower", "direction", "lower_direction")
 _MEMBER_REQUIRED = ("name", "upper", "lower")
 
-Vec = tuple  # tuple of 3 floats
-
 
 # ----------------------------------------------------------------------------- parsing helpers
-def _check_keys(d, allowed, required, where):
-    if not isinstance(d, dict):
-        raise LayoutError(f"{where} must be a mapping (JSON object / YAML mapping) with keys "
-                          f"{', '.join(allowed)}; got {type(d).__name__}")
-    for k in d:
-        if k not in allowed:
-            close = difflib.get_close_matches(str(k), allowed, n=1, cutoff=0.5)
-            hint = f"did you mean '{close[0]}'?" if close else f"valid keys are: {', '.join(allowed)}"
-            raise LayoutError(f"unknown key '{k}' in {where}: {hint}")
-    for k in required:
-        if k not in d:
-            raise LayoutError(f"missing key '{k}' in {where}: add it (required keys: {', '.join(required)})")
-
-
-def _number(x, where) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
-        hint = ""
-        if isinstance(x, str):
-            try:
-                float(x)
-                hint = " (YAML reads '1e-3' as text: write 1.0e-3, or drop the quotes)"
-            except ValueError:
-                pass
-        raise LayoutError(f"{where} must be a number, got {type(x).__name__} {x!r}{hint}")
-    v = float(x)
-    if not math.isfinite(v):
-        raise LayoutError(f"{where} must be a finite number, got {v}: give a real value")
-    return v
-
-
-def _vec3(x, where) -> Vec:
-    if isinstance(x, np.ndarray):
-        x = x.tolist()
-    if not isinstance(x, (list, tuple)):
-        raise LayoutError(f"{where} must be a list of 3 numbers [x, y, z], got {type(x).__name__} {x!r}")
-    if len(x) != 3:
-        raise LayoutError(f"{where} must have 3 components [x, y, z], got {len(x)}: {list(x)!r}")
-    return tuple(_number(v, f"{where}[{i}]") for i, v in enumerate(x))
-
-
-def _number_list(x, where) -> tuple:
-    if isinstance(x, np.ndarray):
-        x = x.tolist()
-    if not isinstance(x, (list, tuple)):
-        raise LayoutError(f"{where} must be a list of numbers, got {type(x).__name__} {x!r}")
-    return tuple(_number(v, f"{where}[{i}]") for i, v in enumerate(x))
-
-
-def _unit(v) -> np.ndarray:
-    v = np.asarray(v, dtype=np.float64)
-    return v / np.linalg.norm(v)
 
 
 # ----------------------------------------------------------------------------- data classes
@@ -214,6 +164,8 @@ class MemberSpec:
                         planes (or the station-0/1 rib planes).
     ``chord_range``     rib: (c_a, c_b); ``eta_range`` spar: (eta_start, eta_end).
     ``upper``, ``lower``, ``direction``, ``lower_direction``: explicit members only.
+    ``seeds``           (k, 3) the defining curve's points when the wing gives them (a full-chord
+                        rib of a station-given wing); :meth:`seed_points` resamples them.
     """
 
     name: str
@@ -237,6 +189,7 @@ class MemberSpec:
     direction: np.ndarray | None = None
     lower_direction: np.ndarray | None = None
     wing_layout: WingLayout | None = field(default=None, repr=False)
+    seeds: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def is_planar(self) -> bool:
@@ -250,6 +203,8 @@ class MemberSpec:
             raise LayoutError(f"member '{self.name}' is explicit: it has no chord-plane seed points; "
                               "use its upper/lower polylines")
         n = max(int(n), 2)
+        if self.seeds is not None:
+            return resample_polyline(self.seeds, n)
         w = self.wing_layout
         if self.kind == "rib":
             c = np.linspace(self.chord_range[0], self.chord_range[1], n)
@@ -260,6 +215,19 @@ class MemberSpec:
             pts = w.chord_point(eta, np.full(n, self.parameter))
         pts[0], pts[-1] = self.start, self.end
         return pts
+
+
+def resample_polyline(points, n: int) -> np.ndarray:
+    """``n`` points evenly spaced by arc length along the polyline ``points`` (k, 3), its two
+    ends exactly."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    s = np.concatenate([[0.0], np.cumsum(norm_rows(np.diff(p, axis=0), axis=1))])
+    if s[-1] == 0:
+        return np.repeat(p[:1], n, axis=0)
+    q = np.linspace(0.0, s[-1], n)
+    out = np.stack([np.interp(q, s, p[:, i]) for i in range(3)], 1)
+    out[0], out[-1] = p[0], p[-1]
+    return out
 
 
 def explicit_plane(spec, tol: float = 1e-9):
@@ -291,13 +259,16 @@ def explicit_plane(spec, tol: float = 1e-9):
 
 @dataclass(frozen=True)
 class Layout:
-    """A validated layout: ``wings`` (:class:`WingLayout`), ``explicit`` members
-    (:class:`ExplicitMember`, the file's ``members`` list) and the default ``up``.
+    """A validated layout: ``wings`` (:class:`WingLayout`, wings given by their corners),
+    ``explicit`` members (:class:`ExplicitMember`, the file's ``members`` list), the default
+    ``up`` and ``station_wings`` (:class:`StationWing`, wings given by their span axis and
+    stations, measured from the skin: :func:`~shellmesh_mdao.layout.wingbox.resolve_layout`).
     :meth:`members` gives the resolved :class:`MemberSpec` list."""
 
     wings: tuple = ()
     explicit: tuple = ()
     up: Vec | None = None
+    station_wings: tuple = ()
 
     # ------------------------------------------------------------ resolution
     def wing(self, name: str) -> WingLayout:
@@ -321,6 +292,12 @@ class Layout:
         out = []
         for w in self.wings:
             out.extend(_wing_members(w, self.wing_up(w)))
+        for w in self.station_wings:
+            if not w.resolved:
+                raise LayoutError(f"wing '{w.name}' is given by its stations: its members are known once its planform "
+                                  "is measured from the skin; resolve the layout against the surface first "
+                                  "(shellmesh_mdao.layout.resolve_layout, which the pipeline's layout stage runs)")
+            out.extend(w.specs)
         for i, m in enumerate(self.explicit):
             out.append(MemberSpec(
                 name=m.name, kind="explicit", wing=None, index=i,
@@ -329,7 +306,22 @@ class Layout:
         return out
 
     def member_names(self) -> list:
-        return [m.name for m in self.members()]
+        """Names of the members, in :meth:`members` order; for a station-given wing not yet
+        resolved, the names it will have (:meth:`StationWing.predicted_names`)."""
+        if all(w.resolved for w in self.station_wings):
+            return [m.name for m in self.members()]
+        out = []
+        for w in self.wings:
+            out.extend(m.name for m in _wing_members(w, self.wing_up(w)))
+        for w in self.station_wings:
+            out.extend(m.name for m in w.specs) if w.resolved else out.extend(w.predicted_names())
+        out.extend(m.name for m in self.explicit)
+        return out
+
+    @property
+    def all_wing_names(self) -> list:
+        """Names of every wing, corner-given then station-given."""
+        return [w.name for w in self.wings] + [w.name for w in self.station_wings]
 
     # ------------------------------------------------------------ checks
     def validate(self, size: float | None = None) -> "Layout":
@@ -339,7 +331,7 @@ class Layout:
         bad ``size``)."""
         for w in self.wings:
             _check_wing_geometry(w, self.wing_up(w))
-        names = [m.name for m in self.members()]
+        names = self.member_names()
         seen = set()
         for n in names:
             if n in seen:
@@ -374,8 +366,7 @@ class Layout:
                 j = int(np.argmin(gap))
                 if gap[j] < size:
                     raise LayoutError(
-                        f"spars '{spar_name(w.name, j)}' (c={c[j]:g}) and '{spar_name(w.name, j + 1)}' "
-                        f"(c={c[j + 1]:g}) "
+                        f"spars '{spar_name(w.name, j)}' (c={c[j]:g}) and '{spar_name(w.name, j + 1)}' (c={c[j + 1]:g}) "
                         f"are {gap[j]:.4g} apart, closer than the element size {size:g}: move them apart "
                         "or use a smaller element size")
         return self
@@ -399,6 +390,7 @@ class Layout:
             if w.spar_chord:
                 wd["spars"] = {"chord_fractions": list(w.spar_chord)}
             wings.append(wd)
+        wings.extend(station_wing_dict(w) for w in self.station_wings)
         d["wings"] = wings
         mem = []
         for m in self.explicit:
@@ -546,35 +538,12 @@ def _check_wing_geometry(w: WingLayout, up: np.ndarray) -> None:
                               "not swapped")
 
 
-def _check_eta(eta, where):
-    for i, e in enumerate(eta):
-        if e < 0.0 or e > 1.0:
-            raise LayoutError(f"{where}[{i}] = {e:g} is outside [0, 1]: stations run from 0 (root) to 1 (tip)")
-    for i in range(1, len(eta)):
-        if eta[i] <= eta[i - 1]:
-            what = "repeated" if eta[i] == eta[i - 1] else "out of order"
-            raise LayoutError(f"{where}[{i}] = {eta[i]:g} is {what} (after {eta[i - 1]:g}): stations must be "
-                              "strictly increasing from root to tip; sort them and remove duplicates")
-
-
-def _check_chord(c, where):
-    for i, v in enumerate(c):
-        if not (0.0 < v < 1.0):
-            raise LayoutError(f"{where}[{i}] = {v:g} is outside (0, 1): a spar lies strictly between the "
-                              "leading edge (0) and the trailing edge (1)")
-    for i in range(1, len(c)):
-        if c[i] <= c[i - 1]:
-            raise LayoutError(f"{where}[{i}] = {c[i]:g} is not greater than {where}[{i - 1}] = {c[i - 1]:g}: "
-                              "chord fractions must be strictly increasing from the leading edge")
-
-
-# ----------------------------------------------------------------------------- parsing
 def _parse_wing(d, i) -> WingLayout:
     where = f"wings[{i}]"
     if isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"].strip():
         where = f"wings[{i}] ('{d['name']}')"
     _check_keys(d, _WING_KEYS, _WING_REQUIRED, where)
-    name = check_plain_name(d["name"], f"{where}.name")
+    name = _name(d["name"], f"{where}.name")
     pts = {k: _vec3(d[k], f"{where}.{k}") for k in ("root_le", "root_te", "tip_le", "tip_te")}
     up = None
     if d.get("up") is not None:
@@ -612,6 +581,20 @@ def _parse_wing(d, i) -> WingLayout:
     return WingLayout(name=name, up=up, rib_eta=rib_eta, spar_chord=spar_chord, rib_count=rib_count, **pts)
 
 
+def _parse_any_wing(d, i):
+    """A corner-given (:class:`WingLayout`) or station-given (:class:`StationWing`) wing entry."""
+    where = f"wings[{i}]"
+    if isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"].strip():
+        where = f"wings[{i}] ('{d['name']}')"
+    if isinstance(d, dict) and any(k in d for k in ("axis", "root", "tip")):
+        corner = [k for k in ("root_le", "root_te", "tip_le", "tip_te") if k in d]
+        if corner:
+            raise LayoutError(f"{where} has both wing-box corners ({', '.join(corner)}) and stations (axis/root/tip): "
+                              "give the corners or the stations, not both")
+        return parse_station_wing(d, i, where)
+    return _parse_wing(d, i)
+
+
 def _parse_polyline(x, where) -> tuple:
     if isinstance(x, np.ndarray):
         x = x.tolist()
@@ -634,7 +617,7 @@ def _parse_member(d, i) -> ExplicitMember:
     if isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"].strip():
         where = f"members[{i}] ('{d['name']}')"
     _check_keys(d, _MEMBER_KEYS, _MEMBER_REQUIRED, where)
-    name = check_plain_name(d["name"], f"{where}.name")
+    name = _name(d["name"], f"{where}.name")
     upper = _parse_polyline(d["upper"], f"{where}.upper")
     lower = _parse_polyline(d["lower"], f"{where}.lower")
     dirs = {}
@@ -706,14 +689,16 @@ def load_layout(source) -> Layout:
         raise LayoutError(f"'members' must be a list of member entries, got {type(members_in).__name__}")
     if not wings_in and not members_in:
         raise LayoutError("the layout has no wings and no members: add a 'wings' or 'members' list")
-    wings = tuple(_parse_wing(w, i) for i, w in enumerate(wings_in))
+    parsed = [_parse_any_wing(w, i) for i, w in enumerate(wings_in)]
     seen = {}
-    for i, w in enumerate(wings):
+    for i, w in enumerate(parsed):
         if w.name in seen:
             raise LayoutError(f"duplicate wing name '{w.name}' (wings[{seen[w.name]}] and wings[{i}]): rename one")
         seen[w.name] = i
+    wings = tuple(w for w in parsed if isinstance(w, WingLayout))
+    stations = tuple(w for w in parsed if isinstance(w, StationWing))
     members = tuple(_parse_member(m, i) for i, m in enumerate(members_in))
-    return Layout(wings=wings, explicit=members, up=up).validate()
+    return Layout(wings=wings, explicit=members, up=up, station_wings=stations).validate()
 
 
 def layout_from_manifest(manifest: dict, geometry_name: str, ribs=10, spars=(0.15, 0.65)) -> Layout:

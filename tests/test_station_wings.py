@@ -1,0 +1,226 @@
+"""Wings given by their span axis and stations (shellmesh_mdao.layout.schema.StationWing,
+shellmesh_mdao.layout.wingbox): the schema, the members laid out in the measured planform
+(spars at local chord fractions, kinked at cranks; rib orientations; root and tip ribs along
+their stations; every member in its box), the checks before meshing, and a run end to end."""
+import copy
+
+import numpy as np
+import pytest
+
+from shellmesh_mdao.errors import LayoutError
+from shellmesh_mdao.geometry import naca_wing
+from shellmesh_mdao.layout import load_layout, resolve_layout
+from shellmesh_mdao.layout.wingbox import MIN_EDGE_ANGLE, SPAR_TOL
+
+SIZE = 0.1
+WING = {"name": "w", "axis": "y", "root": 0.2, "tip": 5.8, "up": [0, 0, 1],
+        "ribs": {"count": 8}, "spars": {"chord_fractions": [0.15, 0.65]}}
+
+
+def layout(**over):
+    w = copy.deepcopy(WING)
+    for k, v in over.items():
+        if v is None:
+            w.pop(k, None)
+        else:
+            w[k] = v
+    return {"wings": [w]}
+
+
+@pytest.fixture(scope="module")
+def wing():
+    return naca_wing()
+
+
+def resolve(surface, d, size=SIZE):
+    return resolve_layout(load_layout(d), surface.points, surface.faces[:, :3], size)
+
+
+def by_name(lay):
+    return {m.name: m for m in lay.members()}
+
+
+# ============================================================================ schema
+def test_parse_and_round_trip():
+    d = layout(cranks=[2.4], near=[1.0, 0.2, 0.0], aft=[1, 0, 0],
+               ribs={"count": 5, "orientation": [0.1, 1.0, 0.0], "end_ribs": "same"},
+               spars={"chord_fractions": [0.15, 0.65], "tip_chord_fractions": [0.2, 0.6],
+                      "crank_chord_fractions": [[0.18, 0.62]]})
+    lay = load_layout(d)
+    w = lay.station_wings[0]
+    assert not lay.wings and w.axis == (0.0, 1.0, 0.0) and w.cranks == (2.4,)
+    assert load_layout(lay.to_dict()) == lay
+    assert w.spar_fractions(np.array([0.0, (2.4 - 0.2) / 5.6, 1.0])).round(6).tolist() == \
+        [[0.15, 0.65], [0.18, 0.62], [0.2, 0.6]]
+    # names are known before the planform is measured; the members are not
+    assert lay.member_names() == ["w/spar_0", "w/spar_1"] + [f"w/rib_{k}" for k in range(5)]
+    with pytest.raises(LayoutError, match="resolve the layout against the surface"):
+        lay.members()
+
+
+@pytest.mark.parametrize("over, match", [
+    (dict(root_le=[0, 0, 0]), "both wing-box corners .* and stations"),
+    (dict(tip=0.2), "root and tip are both 0.2"),
+    (dict(axis="w"), "give 'x', 'y' or 'z'"),
+    (dict(cranks=[7.0]), r"cranks\[0\] = 7 is not between the root"),
+    (dict(ribs={"count": 5, "orientation": "normal_to_spars"}), "did you mean 'normal_to_spar'"),
+    (dict(ribs={"count": 5, "spar": 2}), r"ribs.spar = 2: the wing has 2 spar"),
+    (dict(ribs={"count": 5, "end_ribs": "root"}), "give 'station'"),
+    (dict(spars={"chord_fractions": [0.15, 0.65], "tip_chord_fractions": [0.2]}), "one tip fraction per spar"),
+    (dict(spars={"chord_fractions": [0.15], "crank_chord_fractions": [[0.2]]}), "without tip_chord_fractions"),
+    (dict(up=[0, 0, 0]), "up is the zero vector"),
+    (dict(rootx=1), "unknown key 'rootx'"),
+])
+def test_schema_errors(over, match):
+    with pytest.raises(LayoutError, match=match):
+        load_layout(layout(**over))
+
+
+# ============================================================================ the wing box
+def planform_xt(pf, p):
+    return np.asarray(p) @ pf.axis, pf.x_of(p)
+
+
+@pytest.mark.parametrize("orientation", ["normal_to_spar", "streamwise", "normal_to_midchord"])
+def test_members_follow_the_planform(wing, orientation):
+    lay = resolve(wing, layout(ribs={"count": 8, "orientation": orientation}))
+    w = lay.station_wings[0]
+    pf, up = w.planform, w.planform.up
+    m = by_name(lay)
+    assert list(m) == ["w/spar_0", "w/spar_1"] + [f"w/rib_{k}" for k in range(8)]
+    for spec in m.values():
+        assert abs(spec.plane_normal @ up) < 1e-12                      # every member plane contains up
+        seeds = spec.seed_points(9)
+        assert np.abs((seeds - spec.plane_point) @ spec.plane_normal).max() < 1e-9
+        t = seeds @ pf.axis                                               # inside the wing and the station range
+        assert (t >= pf.root - 1e-9).all() and (t <= pf.tip + 1e-9).all()
+        hu, hl = pf.heights(t, pf.chord_fraction_at(t, pf.x_of(seeds)))
+        v = (seeds - pf.chord_point(t, pf.chord_fraction_at(t, pf.x_of(seeds)))) @ up
+        assert (v < hu).all() and (v > hl).all()
+    # spars at their local chord fraction (straight within SPAR_TOL sizes on this trapezoid: exact)
+    for j, c in enumerate((0.15, 0.65)):
+        s = m[f"w/spar_{j}"].seed_points(21)
+        t = s @ pf.axis
+        assert np.abs(pf.chord_fraction_at(t, pf.x_of(s)) - c).max() * pf.chord(t).max() <= SPAR_TOL * SIZE
+        assert m[f"w/spar_{j}"].bounds == ("w/rib_0", "w/rib_7")
+    # root and tip ribs along their stations, the others as asked
+    for k in (0, 7):
+        assert abs(m[f"w/rib_{k}"].plane_normal @ pf.axis) == pytest.approx(1.0)
+    rear = m["w/spar_1"].end - m["w/spar_1"].start
+    rear = rear - (rear @ up) * up
+    for k in range(1, 7):
+        n = m[f"w/rib_{k}"].plane_normal
+        if orientation == "streamwise":
+            assert n @ pf.axis == pytest.approx(1.0)
+        elif orientation == "normal_to_spar":
+            assert abs(n @ rear) / np.linalg.norm(rear) == pytest.approx(1.0, abs=1e-9)
+        # ribs end on the spar planes
+        r = m[f"w/rib_{k}"]
+        assert r.bounds == ("w/spar_0", "w/spar_1")
+        for p, (q, nb) in zip((r.start, r.end), r.bound_planes):
+            assert abs((p - q) @ nb) < 1e-9
+
+
+def test_normal_to_spar_fans_out_at_the_root_of_a_swept_wing():
+    """On a wing swept 45 deg with close ribs, ribs normal to the rear spar would cross the root and
+    tip ribs: the ones that would come closer than half a spacing turn towards the station."""
+    S = naca_wing(span=4.0, root_chord=1.0, tip_chord=1.0, sweep_deg=45.0, dihedral_deg=0.0)
+    lay = resolve(S, {"wings": [dict(WING, root=0.1, tip=3.9, ribs={"count": 20})]}, size=0.05)
+    pf = lay.station_wings[0].planform
+    ribs = [s for s in lay.members() if "/rib_" in s.name]
+    ang = [np.degrees(np.arccos(min(1.0, abs(r.plane_normal @ pf.axis)))) for r in ribs]
+    assert ang[0] == pytest.approx(0.0, abs=1e-9) and ang[-1] == pytest.approx(0.0, abs=1e-9)
+    assert max(ang) == pytest.approx(45.0, abs=0.5)                       # normal to the spar mid-span
+    assert 0 < ang[1] < 45.0                                              # the fan
+    ends = np.array([[r.start @ pf.axis, r.end @ pf.axis] for r in ribs])
+    gap = np.diff(ends, axis=0).min(axis=1)
+    assert (gap >= 0.5 * (3.8 / 19) - 1e-9).all()                         # half a spacing at both spars
+
+
+def test_crank_kinks_the_spars(wing):
+    S = naca_wing(crank=(0.4, 1.3), sweep_deg=20.0)
+    # a rib meets the spar 0.04 from the crank: the kink moves to a station a size from it
+    lay = resolve(S, layout(cranks=[2.4], ribs={"count": 6}))
+    kink = by_name(lay)["w/spar_1/part_0"].end @ [0, 1, 0]
+    assert kink != pytest.approx(2.4, abs=1e-6) and kink == pytest.approx(2.4, abs=2 * SIZE)
+    lay = resolve(S, layout(cranks=[2.4], ribs={"count": 5}))           # no rib near the crank
+    names = [m.name for m in lay.members()]
+    assert "w/spar_1/part_0" in names and "w/spar_1/part_1" in names and "w/spar_1" not in names
+    m = by_name(lay)
+    a, b = m["w/spar_1/part_0"], m["w/spar_1/part_1"]
+    assert a.end @ [0, 1, 0] == pytest.approx(2.4, abs=1e-9)             # the kink at the crank
+    assert np.linalg.norm(a.end - b.start) < 1e-9 * 10
+    assert b.bounds[0] == "w/spar_1/part_0" and a.bounds[1] == "w/spar_1/part_1"
+    assert np.cross(a.plane_normal, b.plane_normal) @ [0, 0, 1] != pytest.approx(0.0, abs=1e-3)
+    # both pieces at 65 % of the local chord at their ends
+    pf = lay.station_wings[0].planform
+    for p in (a.start, a.end, b.end):
+        t = p @ pf.axis
+        assert pf.chord_fraction_at(t, pf.x_of(p)) == pytest.approx(0.65, abs=0.01)
+
+
+def test_fewer_than_two_spars(wing):
+    """Full-chord ribs where both edges are round or blunt; edge webs at a sharp edge."""
+    lay = resolve(wing, layout(spars={"chord_fractions": [0.35]}, ribs={"count": 4}))
+    w = lay.station_wings[0]
+    assert [m.name for m in lay.members()][:3] == ["w/le_web", "w/spar_0", "w/te_web"]
+    assert any("edge webs" in n and f"{MIN_EDGE_ANGLE:.1f}" in n for n in w.notes)
+    blunt = naca_wing(te_thickness=0.03)
+    lay = resolve(blunt, layout(spars={"chord_fractions": [0.35]}, ribs={"count": 4}))
+    ribs = [m for m in lay.members() if "/rib_" in m.name]
+    assert all(r.kind == "rib" and not r.bound_planes for r in ribs)     # closed sections
+    assert not lay.station_wings[0].notes
+
+
+def test_checks_before_meshing(wing):
+    with pytest.raises(LayoutError, match=r"spar 'w/spar_1' .* tall .* move the spar away from the trailing edge"):
+        resolve(wing, layout(spars={"chord_fractions": [0.15, 0.97]}))
+    with pytest.raises(LayoutError, match=r"ribs 'w/rib_\d+' and 'w/rib_\d+' are .* closer than the element size"):
+        resolve(wing, layout(ribs={"count": 60}))
+    two = {"wings": [dict(WING, name="a"), dict(WING, name="b", root=3.0, tip=5.0)]}
+    with pytest.raises(LayoutError, match="wing 'a' reaches into wing 'b'|wing 'b' reaches into wing 'a'"):
+        resolve(wing, two)
+
+
+def test_corner_layouts_are_untouched(wing):
+    from shellmesh_mdao.geometry import naca_wing_layout
+
+    lay = load_layout(naca_wing_layout())
+    assert resolve_layout(lay, wing.points, wing.faces[:, :3], SIZE) is lay
+
+
+# ============================================================================ end to end
+def test_station_wing_end_to_end(wing):
+    from shellmesh_mdao.guarantees import check_guarantees
+    from shellmesh_mdao.pipeline import run_pipeline
+
+    r = run_pipeline(wing, layout(ribs={"count": 6}), SIZE, progress=False)
+    g = check_guarantees(r)
+    assert g["min_scaled_jacobian"] > 0.2
+    names = set(r.mesh.component_names)
+    assert {"w/spar_0", "w/spar_1", "w/rib_0", "w/rib_5"} <= names
+    assert r.report["wings"]["w"]["root"] == pytest.approx(0.2)
+    assert r.report["inputs"]["layout"]["wings"][0]["root"] == 0.2
+
+
+def test_fin_and_fractions_along_the_span(wing):
+    """A vertical fin (span along z, up lateral) is a wing like any other; spar fractions may vary
+    from the root to the tip."""
+    from shellmesh_mdao.mesh import ShellMesh
+
+    P = wing.points[:, [0, 2, 1]] * [1, -1, 1]                           # turned about x: span along z
+    fin = ShellMesh(P, wing.faces, wing.component, ["skin"])
+    d = {"wings": [{"name": "fin", "axis": "z", "root": 0.3, "tip": 5.5, "up": [0, 1, 0],
+                    "ribs": {"count": 5, "orientation": "streamwise"},
+                    "spars": {"chord_fractions": [0.15, 0.65], "tip_chord_fractions": [0.25, 0.6]}}]}
+    lay = resolve(fin, d)
+    pf = lay.station_wings[0].planform
+    assert abs(pf.up @ [0, 1, 0]) == pytest.approx(1.0)
+    m = by_name(lay)
+    for k in range(5):
+        assert abs(m[f"fin/rib_{k}"].plane_normal @ [0, 0, 1]) == pytest.approx(1.0)
+    for name, (c0, c1) in (("fin/spar_0", (0.15, 0.25)), ("fin/spar_1", (0.65, 0.6))):
+        s = m[name]
+        for p, c in ((s.start, c0), (s.end, c1)):
+            t = p @ pf.axis
+            assert pf.chord_fraction_at(t, pf.x_of(p)) == pytest.approx(c, abs=SPAR_TOL * SIZE / pf.chord(t))
