@@ -212,8 +212,8 @@ def check_thickness_names(thickness, layout, source=None) -> None:
     from .layout import load_layout
 
     lay = load_layout(layout if isinstance(layout, dict) else str(layout))
-    members = {m.name for m in lay.members()}
-    wings = {w.name for w in lay.wings}
+    members = set(lay.member_names())        # a station-given wing: the names it will have
+    wings = {w.name for w in lay.wings} | {w.name for w in lay.station_wings}
     for k in thickness:
         if k in THICKNESS_FAMILIES or k == "default" or k in members or _is_bay_of(k, wings):
             continue

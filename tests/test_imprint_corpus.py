@@ -21,7 +21,6 @@ import copy
 import numpy as np
 import pytest
 
-from shellmesh_mdao.errors import ImprintError
 from shellmesh_mdao.imprint import SNAP_FALLBACK, ChainSpec, Plane, closest_on_polyline, improve_skin, imprint_chains
 from shellmesh_mdao.imprint.common import tri_angles_min
 from shellmesh_mdao.layout import layout_from_manifest
@@ -106,8 +105,8 @@ def test_imprint_redoes_a_cut_that_misses_its_crossing(geometry_dir, manifest):
     the chord, size 0.0312), with the solver option ``snap`` at 0.4. At that snap distance the cut of
     left_wing/spar_1's lower chain snaps a vertex beside its end crossing (the wing is thin there) and
     ends one vertex off it; the imprint finds the crossing missing and redoes that one cut at
-    ``SNAP_FALLBACK`` (0.25). Without the fallback the imprint refuses that chain (its cut does not run
-    between its two ends)."""
+    ``SNAP_FALLBACK`` (0.25); with the fallback switched off, the last resort (a cut without snapping)
+    keeps the crossing."""
     from shellmesh_mdao.benchmarks import stress as SL
     case = SL.draw_case(139, "swept_wing", manifest=manifest, geometry_dir=geometry_dir)
     lay = layout_from_manifest(manifest, "swept_wing", ribs=list(case["ribs"]), spars=list(case["spars"]))
@@ -116,10 +115,11 @@ def test_imprint_redoes_a_cut_that_misses_its_crossing(geometry_dir, manifest):
                       until="remesh", progress=False, options=opts).state
     P, T = st.surface.points, st.surface.faces[:, :3]
     tol = 1e-9 * st.surface.diagonal
-    # the fallback switched off: the chain's cut ends one vertex off its crossing and runs past it
-    # onto the other skin side, which the imprint refuses, naming the chain and the place
-    with pytest.raises(ImprintError, match=r"left_wing/spar_1 \(lower\): its curve on the skin does not run between"):
-        imprint_chains(st.mesh, P, T, st.specs, snap=0.4, snap_fallback=0.4, locator=st.locator)
+    # the fallback snap switched off (equal to the snap): the cut at 0.4 ends one vertex off its
+    # crossing, and the last resort, a cut without snapping, keeps it: every junction is shared
+    mesh, chains = imprint_chains(st.mesh, P, T, st.specs, snap=0.4, snap_fallback=0.4, locator=st.locator)
+    assert junction_misses(mesh, chains, tol) == []
+    assert [(c.member, c.side, c.snap) for c in chains if c.snap != 0.4] == [("left_wing/spar_1", "lower", 0.0)]
     # as the pipeline runs it: that one chain is cut again at 0.25, every junction is shared
     mesh, chains = imprint_chains(st.mesh, P, T, st.specs, snap=0.4, locator=st.locator)
     assert junction_misses(mesh, chains, tol) == []
