@@ -224,3 +224,24 @@ def test_fin_and_fractions_along_the_span(wing):
         for p, c in ((s.start, c0), (s.end, c1)):
             t = p @ pf.axis
             assert pf.chord_fraction_at(t, pf.x_of(p)) == pytest.approx(c, abs=SPAR_TOL * SIZE / pf.chord(t))
+
+
+def test_station_wing_skin_bays(wing):
+    """A wing given by stations gets its skin bays, as a corner-given wing does: upper and lower
+    skin between each pair of consecutive ribs, each on its side of the chord (face normals along
+    +up on the upper bays, -up on the lower), the rest of the skin outside the box."""
+    from shellmesh_mdao.families import bay_name
+    from shellmesh_mdao.pipeline import run_pipeline
+
+    r = run_pipeline(wing, layout(ribs={"count": 5, "orientation": "streamwise"}), SIZE, until="imprint",
+                     progress=False)
+    m = r.mesh
+    names = list(m.component_names)
+    n = m.face_normals()
+    for k in range(4):
+        for side, sign in (("upper", 1.0), ("lower", -1.0)):
+            cid = names.index(bay_name("w", side, k))
+            faces = m.component == cid
+            assert faces.sum() > 10, (side, k)
+            assert sign * (n[faces] @ np.array([0.0, 0.0, 1.0])).mean() > 0.9, (side, k)
+    assert (m.component == names.index("skin")).any()

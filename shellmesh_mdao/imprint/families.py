@@ -20,6 +20,10 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
     when at least 99% of its face centroids lie inside the bay's box (between the two rib
     planes and, with two or more spars, the first and last spar planes); its faces are then
     split into upper and lower by their side (along ``up``) of the bay's mid-chord point.
+
+    A wing given by stations (``layout.station_wings``, resolved) is named the same way; its bay is
+    the patch between two consecutive rib planes (its ribs may have any orientation and its spars
+    kinks; the spar and edge-web chains close the patch), split at the ribs' mid-chord points.
     """
     topo = mesh.topology()
     chain_e = mesh.feature_edges[mesh.feature_edge_ids >= 0]
@@ -55,6 +59,25 @@ def skin_families(mesh: ShellMesh, layout) -> ShellMesh:
             frac = np.bincount(patch, weights=inside.astype(float)) / np.bincount(patch)
             box = frac[patch] >= 0.99
             upper = (cen - chord_pt) @ up >= 0
+            for side, mask in (("upper", box & upper), ("lower", box & ~upper)):
+                if mask.any():
+                    comp[mask] = len(names)
+                    names.append(bay_name(w.name, side, k))
+    for w in getattr(layout, "station_wings", ()):
+        # a wing given by stations: its ribs may be oriented any way (normal to a spar, streamwise,
+        # fanned at the root) and its spars kinked, so a bay is the patch between two rib planes
+        # alone (the spar and web chains close it); each rib normal is turned towards the next rib
+        ribs = [members[n] for n in (rib_name(w.name, k) for k in range(len(w.rib_eta))) if n in members]
+        for k in range(len(ribs) - 1):
+            a, b = ribs[k], ribs[k + 1]
+            step = b.plane_point - a.plane_point
+            na = a.plane_normal if step @ a.plane_normal >= 0 else -a.plane_normal
+            nb = b.plane_normal if step @ b.plane_normal >= 0 else -b.plane_normal
+            inside = ((cen - a.plane_point) @ na >= 0) & ((cen - b.plane_point) @ nb <= 0)
+            frac = np.bincount(patch, weights=inside.astype(float)) / np.bincount(patch)
+            box = frac[patch] >= 0.99
+            # the ribs' middle seeds lie on the wing's chord surface
+            upper = (cen - 0.5 * (a.plane_point + b.plane_point)) @ a.up >= 0
             for side, mask in (("upper", box & upper), ("lower", box & ~upper)):
                 if mask.any():
                     comp[mask] = len(names)
