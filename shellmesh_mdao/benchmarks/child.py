@@ -12,7 +12,7 @@ import multiprocessing as mp
 import resource
 import time
 
-__all__ = ["run_in_child"]
+__all__ = ["run_in_child", "failing_stage"]
 
 
 def _child(conn, fn, args, kwargs):
@@ -60,3 +60,15 @@ def run_in_child(fn, *args, timeout: float = 3600.0, **kwargs) -> dict:
                    "error": f"child process died (exit code {proc.exitcode})"}
     out["process_wall_s"] = elapsed
     return out
+
+
+def failing_stage(tb, default: str = "") -> str:
+    """Name of the innermost ``stage_<name>`` pipeline function a traceback ``tb`` went through (the
+    stage that failed), or ``default`` when it went through none."""
+    stage = default
+    while tb is not None:
+        name = tb.tb_frame.f_code.co_name
+        if name.startswith("stage_"):
+            stage = name[len("stage_"):]
+        tb = tb.tb_next
+    return stage

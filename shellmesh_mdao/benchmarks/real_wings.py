@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .child import run_in_child
+from .child import failing_stage, run_in_child
 
 __all__ = ["LAYOUTS", "ORIENTATIONS", "DIVISORS", "span_axis", "station_layout", "semi_span", "run_case",
            "run_case_in_child", "matrix_cases", "summary_counts", "write_page"]
@@ -100,24 +100,14 @@ def run_case(geometry_dir, geometry: str, layout_name: str, orientation: str, di
             out["outcome"], out["stage"], out["error"] = "guarantee", "guarantees", str(e)
     except ShellMeshError as e:
         out["outcome"], out["error"] = "refused", f"{type(e).__name__}: {e}"
-        out["stage"] = _stage_of(e.__traceback__) or out["stage"]
+        out["stage"] = failing_stage(e.__traceback__) or out["stage"]
     except Exception as e:  # noqa: BLE001 -- any other exception is a crash, recorded
         out["outcome"], out["error"] = "crash", f"{type(e).__name__}: {e}"
-        out["stage"] = _stage_of(e.__traceback__)
+        out["stage"] = failing_stage(e.__traceback__)
         out["traceback"] = traceback.format_exc()[-3000:]
     out["seconds"] = round(time.perf_counter() - t0, 1)
     return out
 
-
-def _stage_of(tb) -> str:
-    """The pipeline stage function a traceback went through last."""
-    stage = ""
-    while tb is not None:
-        name = tb.tb_frame.f_code.co_name
-        if name.startswith("stage_"):
-            stage = name[len("stage_"):]
-        tb = tb.tb_next
-    return stage
 
 
 def run_case_in_child(geometry_dir, geometry, layout_name, orientation, divisor, timeout: float = 1800.0) -> dict:

@@ -51,7 +51,7 @@ import numpy as np
 from ..errors import ShellMeshError
 from ..families import rib_name, spar_name
 from ..guarantees import check_guarantees
-from .child import run_in_child
+from .child import failing_stage, run_in_child
 from .corpus import CORPUS_SIZES
 
 __all__ = ["BASE_SIZES", "GEOMETRIES", "HEIGHT_TIGHT", "SIZE_FACTORS", "TIGHT", "TROUBLESHOOTING", "WEDGE_TIGHT",
@@ -451,15 +451,6 @@ def reclassify(r: dict) -> dict:
 
 
 # ============================================================================ one case
-def _failing_stage(tb) -> str:
-    """Name of the innermost ``stage_<name>`` function of the traceback (the failing stage)."""
-    stage = "pipeline"
-    while tb is not None:
-        fn = tb.tb_frame.f_code.co_name
-        if fn.startswith("stage_"):
-            stage = fn[len("stage_"):]
-        tb = tb.tb_next
-    return stage
 
 
 def run_case(case: dict, geometry_dir, manifest: dict | None = None) -> dict:
@@ -500,7 +491,7 @@ def run_case(case: dict, geometry_dir, manifest: dict | None = None) -> dict:
             out["reason"] = "a guarantee does not hold"
         else:
             if out["stage"] == "pipeline":
-                out["stage"] = _failing_stage(e.__traceback__)
+                out["stage"] = failing_stage(e.__traceback__, "pipeline")
             out["outcome"], out["reason"] = classify_refusal(type(e).__name__, str(e), out["stage"], t)
     except Exception as e:  # noqa: BLE001 -- any other exception is a FAIL, recorded with its traceback
         out["error"] = f"{type(e).__name__}: {e}"
