@@ -212,26 +212,7 @@ a foreign deck
 
 
 def test_gmsh_msh_physical_groups(tmp_path):
-    gmsh = pytest.importorskip("gmsh")
-    path = tmp_path / "g.msh"
-    own = not gmsh.isInitialized()
-    if own:
-        gmsh.initialize(readConfigFiles=False, interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("g")
-        gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
-        gmsh.model.occ.synchronize()
-        surfs = [t for _, t in gmsh.model.getEntities(2)]
-        gmsh.model.addPhysicalGroup(2, surfs[:2], 5, name="front")
-        gmsh.model.addPhysicalGroup(2, surfs[2:], 8, name="rest")
-        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.3)
-        gmsh.model.mesh.generate(2)
-        gmsh.write(str(path))
-        gmsh.model.remove()
-    finally:
-        if own:
-            gmsh.finalize()
+    path = _gmsh_box_msh(tmp_path / "g.msh", {"front": [0, 1], "rest": [2, 3, 4, 5]})
     mesh, rep = load_surface(path)
     assert mesh.component_names == ["front", "rest"]
     assert rep.closed and rep.n_bodies == 1 and set(np.unique(mesh.component)) == {0, 1}
