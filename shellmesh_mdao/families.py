@@ -11,6 +11,12 @@ name                               kind         made by
                                                 outside the wing boxes (:data:`SKIN`)
 ``<wing>/rib_<k>``                 rib          rib ``k`` (0 at the root), :func:`rib_name`
 ``<wing>/spar_<j>``                spar         spar ``j`` (0 at the leading edge), :func:`spar_name`
+``<wing>/le_web``                  web          the leading- and trailing-edge webs of a
+``<wing>/te_web``                  web          station-given wing with fewer than two spars and
+                                                a sharp edge, :func:`web_name`
+``<spar or web>/part_<p>``         (member's)   planar piece ``p`` (0 at the root) of a kinked
+                                                spar or web of a station-given wing,
+                                                :func:`spar_part_name`, :func:`part_name`
 ``<name>``                         explicit     an explicit member of the layout, its own name
 ``<member>/seg_<j>``               (member's)   piece ``j`` of a member split at X-junctions,
                                                 along its direction, :func:`segment_name`
@@ -74,6 +80,7 @@ _SCHEME = (
     ("spar", re.compile(rf"^{_PLAIN}/spar_{_INDEX}(?:/seg_{_INDEX})?$")),
     ("spar_part", re.compile(rf"^{_PLAIN}/spar_{_INDEX}/part_{_INDEX}(?:/seg_{_INDEX})?$")),
     ("web", re.compile(rf"^{_PLAIN}/(le|te)_web(?:/seg_{_INDEX})?$")),
+    ("web_part", re.compile(rf"^{_PLAIN}/(le|te)_web/part_{_INDEX}(?:/seg_{_INDEX})?$")),
     ("skin_bay", re.compile(rf"^{_PLAIN}/(upper|lower)_skin/bay_{_INDEX}$")),
     ("explicit", re.compile(rf"^{_PLAIN}/seg_{_INDEX}$")),
 )
@@ -93,7 +100,8 @@ class ComponentName:
     ``index``    rib ``k``, spar ``j`` or bay ``k``; None for the skin and explicit members.
     ``side``     ``'upper'`` or ``'lower'`` for a bay, ``'le'`` or ``'te'`` for an edge web, else None.
     ``segment``  ``j`` of a member piece ``<member>/seg_<j>``, else None.
-    ``part``     ``p`` of a spar piece ``<wing>/spar_<j>/part_<p>``, else None.
+    ``part``     ``p`` of a spar or web piece (``<wing>/spar_<j>/part_<p>``, ``<wing>/le_web/part_<p>``),
+                 else None.
     """
 
     name: str
@@ -213,10 +221,14 @@ def parse_component(name: str) -> ComponentName:
                                  segment=None if m[4] is None else int(m[4]))
         if kind == "web":
             return ComponentName(name, kind, wing=m[1], side=m[2], segment=None if m[3] is None else int(m[3]))
+        if kind == "web_part":
+            return ComponentName(name, "web", wing=m[1], side=m[2], part=int(m[3]),
+                                 segment=None if m[4] is None else int(m[4]))
         return ComponentName(name, kind, wing=m[1], index=int(m[2]),
                              segment=None if m[3] is None else int(m[3]))
     raise LayoutError(f"component name {name!r} does not follow the naming scheme: '<wing>/rib_<k>', "
                       "'<wing>/spar_<j>', '<wing>/spar_<j>/part_<p>', '<wing>/le_web', '<wing>/te_web', "
+                      "'<wing>/le_web/part_<p>', "
                       "'<member>/seg_<j>', '<wing>/upper_skin/bay_<k>', "
                       "'<wing>/lower_skin/bay_<k>', 'skin' or a name without '/'")
 

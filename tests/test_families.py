@@ -46,9 +46,25 @@ def test_build_parse_round_trip(name, kind, wing, index, side, segment, member, 
     assert F.is_rib_or_spar(name) == (kind in ("rib", "spar"))
 
 
+@pytest.mark.parametrize("name, kind, index, side, part, segment, member", [
+    (F.spar_part_name("w", 1, 2), "spar", 1, None, 2, None, "w/spar_1/part_2"),
+    (F.segment_name(F.spar_part_name("w", 0, 1), 3), "spar", 0, None, 1, 3, "w/spar_0/part_1"),
+    (F.web_name("w", "le"), "web", None, "le", None, None, "w/le_web"),
+    (F.part_name(F.web_name("w", "te"), 1), "web", None, "te", 1, None, "w/te_web/part_1"),
+    (F.segment_name(F.part_name(F.web_name("w", "le"), 0), 2), "web", None, "le", 0, 2, "w/le_web/part_0"),
+])
+def test_station_wing_pieces_parse(name, kind, index, side, part, segment, member):
+    """The spar and edge-web pieces of a station-given wing (kinked at cranks, split at X-junctions)
+    follow the scheme: spar or web family, members of the wing box."""
+    c = F.parse_component(name)
+    assert (c.kind, c.wing, c.index, c.side, c.part, c.segment) == (kind, "w", index, side, part, segment)
+    assert c.member == member and c.family == "spar" and F.is_rib_or_spar(name) and not F.is_skin(name)
+
+
 def test_names_outside_the_scheme():
     for bad in ("w/rib_x", "w/rib_01", "w/rib_-1", "w/ribs_1", "a/b/rib_1", "w/rib_1/seg_", "w/upper_skin",
-                "w/middle_skin/bay_0", "w/upper_skin/bay_0/seg_1", "/rib_1", "w/", "w/spar_1/seg_1/seg_2"):
+                "w/middle_skin/bay_0", "w/upper_skin/bay_0/seg_1", "/rib_1", "w/", "w/spar_1/seg_1/seg_2",
+                "w/le_web/part_x", "w/mid_web/part_0", "w/le_web/seg_0/part_1"):
         with pytest.raises(LayoutError, match="does not follow the naming scheme"):
             F.parse_component(bad)
         assert not (F.is_skin_bay(bad) or F.is_rib_or_spar(bad))
