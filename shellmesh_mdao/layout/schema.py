@@ -409,45 +409,82 @@ class Layout:
 
     # ------------------------------------------------------------ design variables
     def parameters(self) -> tuple:
-        """``(rib_eta, spar_chord)``: dicts wing name -> float64 array (copies)."""
-        return ({w.name: np.array(w.rib_eta, dtype=np.float64) for w in self.wings},
-                {w.name: np.array(w.spar_chord, dtype=np.float64) for w in self.wings})
+        """``(rib_eta, spar_chord)``: dicts wing name -> float64 array (copies), for every wing,
+        corner-given then station-given (a station-given wing's ``spar_chord`` is its root chord
+        fractions, which hold along the whole span when it gives no tip fractions)."""
+        ws = self.wings + self.station_wings
+        return ({w.name: np.array(w.rib_eta, dtype=np.float64) for w in ws},
+                {w.name: np.array(w.spar_chord, dtype=np.float64) for w in ws})
 
-    def with_parameters(self, rib_eta: dict | None = None, spar_chord: dict | None = None) -> "Layout":
+    def with_parameters(self, rib_eta: dict | None = None, spar_chord: dict | None = None,
+                        spar_chord_tip: dict | None = None, spar_chord_cranks: dict | None = None) -> "Layout":
         """A new validated Layout with the given rib stations / spar chord fractions per wing
         (wings not named keep theirs). Counts are fixed: each array must have as many
-        entries as the wing has ribs / spars."""
-        rib_eta = dict(rib_eta or {})
-        spar_chord = dict(spar_chord or {})
-        names = [w.name for w in self.wings]
-        for key, d in (("rib_eta", rib_eta), ("spar_chord", spar_chord)):
+        entries as the wing has ribs / spars.
+
+        Corner- and station-given wings alike: ``rib_eta`` the rib stations (span fractions from
+        the root to the tip station for a station-given wing), ``spar_chord`` the spar chord
+        fractions (a station-given wing's root fractions, of the local chord). Station-given wings
+        that give them also take ``spar_chord_tip`` (one fraction per spar) and
+        ``spar_chord_cranks`` (one list per crank, ``(n_cranks, n_spars)``). A station-given wing
+        with new values is returned unresolved: the pipeline's layout stage lays it out again."""
+        given = {"rib_eta": dict(rib_eta or {}), "spar_chord": dict(spar_chord or {}),
+                 "spar_chord_tip": dict(spar_chord_tip or {}), "spar_chord_cranks": dict(spar_chord_cranks or {})}
+        names = self.all_wing_names
+        for key, d in given.items():
             for k in d:
                 if k not in names:
                     close = difflib.get_close_matches(str(k), names, n=1, cutoff=0.5)
                     hint = f"did you mean '{close[0]}'?" if close else f"wings are: {', '.join(names)}"
                     raise LayoutError(f"{key} names unknown wing '{k}': {hint}")
-        wings = []
-        for w in self.wings:
-            nw = w
-            if w.name in rib_eta:
-                eta = _number_list(np.asarray(rib_eta[w.name], dtype=np.float64).reshape(-1),
-                                   f"rib_eta['{w.name}']")
-                if len(eta) != len(w.rib_eta):
-                    raise LayoutError(f"rib_eta['{w.name}'] has {len(eta)} entries but the wing has "
-                                      f"{len(w.rib_eta)} ribs: the rib count is fixed, give one eta per rib")
-                _check_eta(eta, f"rib_eta['{w.name}']")
-                nw = replace(nw, rib_eta=eta, rib_count=None)
-            if w.name in spar_chord:
-                c = _number_list(np.asarray(spar_chord[w.name], dtype=np.float64).reshape(-1),
-                                 f"spar_chord['{w.name}']")
-                if len(c) != len(w.spar_chord):
-                    raise LayoutError(f"spar_chord['{w.name}'] has {len(c)} entries but the wing has "
-                                      f"{len(w.spar_chord)} spars: the spar count is fixed, give one fraction "
-                                      "per spar")
-                _check_chord(c, f"spar_chord['{w.name}']")
-                nw = replace(nw, spar_chord=c)
-            wings.append(nw)
-        return replace(self, wings=tuple(wings)).validate()
+        stations = {w.name: w for w in self.station_wings}
+        for key, what in (("spar_chord_tip", "tip"), ("spar_chord_cranks", "crank")):
+            for k in given[key]:
+                if getattr(stations.get(k), key, None) is None:
+                    raise LayoutError(f"{key} names wing '{k}', which has no {what} chord fractions in the "
+                                      "layout: give spar_chord for it (or add "
+                                      "tip_chord_fractions / crank_chord_fractions to its spars in the layout)")
+        wings = tuple(_with_wing_parameters(w, given) for w in self.wings)
+        station_wings = tuple(_with_wing_parameters(w, given) for w in self.station_wings)
+        return replace(self, wings=wings, station_wings=station_wings).validate()
+
+
+def _with_wing_parameters(w, given):
+    """Wing ``w`` (corner- or station-given) with the values of ``given`` (key -> {wing: values})."""
+    changes = {}
+    if w.name in given["rib_eta"]:
+        eta = _number_list(np.asarray(given["rib_eta"][w.name], dtype=np.float64).reshape(-1),
+                           f"rib_eta['{w.name}']")
+        if len(eta) != len(w.rib_eta):
+            raise LayoutError(f"rib_eta['{w.name}'] has {len(eta)} entries but the wing has "
+                              f"{len(w.rib_eta)} ribs: the rib count is fixed, give one eta per rib")
+        _check_eta(eta, f"rib_eta['{w.name}']")
+        changes.update(rib_eta=eta, rib_count=None)
+    for key, attr in (("spar_chord", "spar_chord"), ("spar_chord_tip", "spar_chord_tip")):
+        if w.name in given[key]:
+            c = _number_list(np.asarray(given[key][w.name], dtype=np.float64).reshape(-1), f"{key}['{w.name}']")
+            if len(c) != len(w.spar_chord):
+                raise LayoutError(f"{key}['{w.name}'] has {len(c)} entries but the wing has "
+                                  f"{len(w.spar_chord)} spars: the spar count is fixed, give one fraction "
+                                  "per spar")
+            _check_chord(c, f"{key}['{w.name}']")
+            changes[attr] = c
+    if w.name in given["spar_chord_cranks"]:
+        v = np.asarray(given["spar_chord_cranks"][w.name], dtype=np.float64)
+        n_c, n_s = len(w.spar_chord_cranks), len(w.spar_chord)
+        if v.size != n_c * n_s:
+            raise LayoutError(f"spar_chord_cranks['{w.name}'] has {v.size} values but the wing has {n_c} crank(s) "
+                              f"and {n_s} spar(s): give one list of {n_s} chord fractions per crank")
+        v = v.reshape(n_c, n_s)
+        lists = tuple(_number_list(v[i], f"spar_chord_cranks['{w.name}'][{i}]") for i in range(n_c))
+        for i, c in enumerate(lists):
+            _check_chord(c, f"spar_chord_cranks['{w.name}'][{i}]")
+        changes["spar_chord_cranks"] = lists
+    if not changes:
+        return w
+    if isinstance(w, StationWing):                  # laid out again against the skin
+        changes.update(planform=None, specs=(), notes=())
+    return replace(w, **changes)
 
 
 # ----------------------------------------------------------------------------- resolution
