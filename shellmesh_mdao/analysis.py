@@ -117,12 +117,35 @@ def _load_layout(layout):
 
 
 def layout_up(layout) -> np.ndarray:
-    """Unit ``up`` of the first wing of a layout (path, dict or Layout)."""
+    """Unit ``up`` of the first wing of a layout (path, dict or Layout): a corner-given wing's
+    (its own, else the layout's), else a station-given wing's (its own, the layout's, or the one
+    measured from the skin when the layout is resolved)."""
     lay = _load_layout(layout)
-    if lay is None or not lay.wings:
+    if lay is None or not (lay.wings or lay.station_wings):
         raise SolverError("the analysis needs the 'up' direction (the load and the tip deflection act along it) "
                           "and the layout has no wing: give up=[0, 0, 1] (the chord-plane normal)")
-    return lay.wing_up(lay.wings[0])
+    if lay.wings:
+        return lay.wing_up(lay.wings[0])
+    w = lay.station_wings[0]
+    up = w.up if w.up is not None else lay.up if lay.up is not None else \
+        (w.planform.up if w.resolved else None)
+    if up is None:
+        raise SolverError(f"wing '{w.name}' is given by its stations without 'up': give up=[0, 0, 1] (the chord-plane "
+                          "normal) to the analysis, or 'up' to the wing in the layout")
+    u = np.asarray(up, dtype=np.float64)
+    return u / np.linalg.norm(u)
+
+
+def _span_vector(lay) -> np.ndarray | None:
+    """Root -> tip direction of a layout's first wing (None without wings)."""
+    if lay is None:
+        return None
+    if lay.wings:
+        return lay.wings[0].span_vector()
+    if lay.station_wings:
+        w = lay.station_wings[0]
+        return np.asarray(w.axis, dtype=np.float64) * np.sign(w.tip - w.root)
+    return None
 
 
 def resolve_up(up=None, layout=None) -> np.ndarray:
@@ -148,7 +171,8 @@ def clamped_nodes(mesh: ShellMesh, rule="root", *, layout=None, axis=None, tol: 
       else, with a ``layout``, the coordinate axis closest to its first wing's span vector
       (mid-chord root -> tip), the root end being the end that vector points away from; else
       the longest bounding-box axis, root at its minimum. ``tol`` defaults to 1e-4 times the
-      mesh's bounding-box diagonal. For a wing whose root is a flat end cap (the NACA wings,
+      mesh's bounding-box diagonal (a station-given wing: its span axis, root station to tip
+      station). For a wing whose root is a flat end cap (the NACA wings,
       a box beam) this is the cap and the skin's root section.
     * ``"root_rib"``: the nodes of every family named ``*/rib_0`` (the root rib of each wing)
       and of its imprint chains on the skin (feature edges owned by that family).
@@ -173,8 +197,8 @@ def clamped_nodes(mesh: ShellMesh, rule="root", *, layout=None, axis=None, tol: 
             if axis not in (0, 1, 2):
                 raise SolverError(f"axis must be 0, 1 or 2 (x, y, z), got {axis!r}")
             ax = int(axis)
-        elif layout is not None and _load_layout(layout).wings:
-            s = _load_layout(layout).wings[0].span_vector()
+        elif _span_vector(_load_layout(layout)) is not None:
+            s = _span_vector(_load_layout(layout))
             ax = int(np.argmax(np.abs(s)))
             sign = 1.0 if s[ax] >= 0 else -1.0
         else:
