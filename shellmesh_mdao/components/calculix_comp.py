@@ -9,24 +9,27 @@ one ccx run per non-empty family. See ``docs/analysis.md``.
 The mesh comes either as the option ``mesh`` or, when that option is not given, as the
 discrete input ``shell_mesh`` (from a :class:`~shellmesh_mdao.components.group.ShellMeshGroup`:
 a new mesh at every design point). Then the ``thickness`` order is the option
-``family_names`` (default: the families of the option ``layout``), the clamped nodes are
+``family_names`` (default: the families of the option ``layout``, fixed by the layout; a mesh
+family takes the thickness of its own name or of its nearest listed parent, e.g. the pieces of
+a station-given wing's kinked spar that of the spar), the clamped nodes are
 found again for every new mesh, FD partials are declared for every family, and a
 :class:`~shellmesh_mdao.errors.ShellMeshError` of the analysis (ccx fails on this mesh) is
 raised as ``om.AnalysisError`` so a DOE records the case as failed and goes on.
-``last_result.ks_von_mises`` is then in ``family_names`` order too.
+``last_result.ks_von_mises`` is then in ``family_names`` order too (the KS aggregate over all
+the faces of each listed family).
 """
 from __future__ import annotations
 
 import numpy as np
 import openmdao.api as om
 
-from ..analysis import ANALYSIS_MATERIAL, ELEMENT_TYPES, analyse_shell, clamped_nodes, find_ccx, n_families, \
-    resolve_up
+from ..analysis import ANALYSIS_MATERIAL, ELEMENT_TYPES, analyse_shell, clamped_nodes, find_ccx, ks_aggregate, \
+    n_families, resolve_up
 from ..export import DEFAULT_THICKNESS, resolve_material
 from ..families import LOWER_SKIN_PATTERN, padded_names
 from ..mesh import ShellMesh
 from .layout_comp import case_errors
-from .mass_comp import discrete_family_names, mapped_family_values
+from .mass_comp import discrete_family_names, mesh_family_positions
 
 __all__ = ["CalculixShellAnalysis"]
 
@@ -34,7 +37,8 @@ __all__ = ["CalculixShellAnalysis"]
 class CalculixShellAnalysis(om.ExplicitComponent):
     """CalculiX shell analysis: mass, stresses and tip deflection from per-family thicknesses.
 
-    Input ``thickness`` (n_families,) in ``mesh.component_names`` order. Outputs ``mass``,
+    Input ``thickness`` (n_families,) in ``mesh.component_names`` order (with ``shell_mesh``:
+    :attr:`family_names` order). Outputs ``mass``,
     ``max_von_mises``, ``ks_von_mises`` (n_families,: KS aggregate of the element von Mises
     stresses of each family, 0 for families without faces) and ``tip_deflection``
     (displacement along ``up`` of the node of largest ``|u.up|`` among ``tip_nodes``, or among
@@ -104,7 +108,7 @@ class CalculixShellAnalysis(om.ExplicitComponent):
             self.family_names = padded_names(mesh.component_names, n)
         self.last_result = None
         self.add_input("thickness", val=np.full(n, float(o["thickness"])), shape=(n,),
-                       desc="shell thickness of each family, in mesh.component_names order")
+                       desc="shell thickness of each family, in family_names order")
         self.add_output("mass", val=0.0, desc="mass of all shells (material rho)")
         self.add_output("max_von_mises", val=0.0, desc="largest integration-point von Mises stress")
         self.add_output("ks_von_mises", val=np.zeros(n), shape=(n,), desc="KS von Mises stress per family")
@@ -129,12 +133,8 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         self._cache.clear()                        # results belong to the previous mesh
         with case_errors():
             self._clamped = clamped_nodes(mesh, o["clamp"], layout=self._layout, axis=o["axis"], tol=o["clamp_tol"])
-        pos = {name: i for i, name in enumerate(self.family_names)}
-        nm = n_families(mesh)
-        names = padded_names(mesh.component_names, nm)
-        mapped_family_values(self, mesh, np.zeros(nm))     # every family with faces must be named
-        self._mesh_pos = np.array([pos.get(name, -1) for name in names], dtype=np.int64)
-        counts = np.bincount(mesh.component, minlength=nm)
+        self._mesh_pos = mesh_family_positions(self, mesh)   # every family with faces is listed (or a parent)
+        counts = np.bincount(mesh.component, minlength=len(self._mesh_pos))
         self._nonempty = np.unique(self._mesh_pos[(counts > 0) & (self._mesh_pos >= 0)])
         self._ctx_mesh = mesh
 
@@ -151,7 +151,9 @@ class CalculixShellAnalysis(om.ExplicitComponent):
                 tm = np.where(self._mesh_pos >= 0, t[np.maximum(self._mesh_pos, 0)], float(self.options["thickness"]))
                 with case_errors():
                     r = self._run(tm, mesh)
-                r.ks_von_mises = mapped_family_values(self, mesh, r.ks_von_mises)
+                # KS over all the faces of each listed family (a spar and its pieces together)
+                r.ks_von_mises = ks_aggregate(r.von_mises, self._mesh_pos[mesh.component], len(self.family_names),
+                                              rho=float(self.options["ks_rho"]), ref=self.options["ks_ref"])
             else:
                 r = self._run(t)
         self._cache[key] = r                      # most recent last

@@ -8,7 +8,9 @@
 
 passing the layout and the :class:`~shellmesh_mdao.pipeline.PipelineState` as discrete
 variables. It promotes the continuous layout inputs ``<wing>:rib_eta`` and
-``<wing>:spar_chord``, the discrete output ``shell_mesh`` and the continuous outputs
+``<wing>:spar_chord`` (and a station-given wing's ``<wing>:spar_chord_tip``,
+``<wing>:spar_chord_crank``: :func:`~shellmesh_mdao.components.layout_comp.layout_input_names`),
+the discrete output ``shell_mesh`` and the continuous outputs
 ``n_nodes``, ``n_elements`` and ``min_scaled_jacobian``. See docs/openmdao.md.
 """
 from __future__ import annotations
@@ -81,10 +83,12 @@ class ShellMeshGroup(om.Group):
     remeshed skin across runs, default True), ``memoize`` (stages skip work when their input
     object is unchanged, default True).
 
-    Promoted: inputs ``<wing>:rib_eta``, ``<wing>:spar_chord``; outputs ``shell_mesh``
-    (discrete), ``n_nodes``, ``n_elements``, ``min_scaled_jacobian``.
-    :attr:`family_names` (after setup) is the component-family order of the mesh, i.e. the
-    ``thickness`` order of analysis components fed by ``shell_mesh``.
+    Promoted: inputs ``<wing>:rib_eta``, ``<wing>:spar_chord`` (station-given wings also
+    ``<wing>:spar_chord_tip``, ``<wing>:spar_chord_crank`` when their layout gives tip / crank
+    fractions; :attr:`layout_inputs` after setup); outputs ``shell_mesh`` (discrete),
+    ``n_nodes``, ``n_elements``, ``min_scaled_jacobian``. :attr:`family_names` (after setup) is
+    the ``thickness`` order of analysis components fed by ``shell_mesh``, fixed by the layout
+    (:func:`~shellmesh_mdao.components.layout_comp.family_names`).
     """
 
     def initialize(self):

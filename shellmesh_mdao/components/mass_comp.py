@@ -9,8 +9,10 @@ The mesh comes either as the option ``mesh`` (fixed for the life of the problem)
 that option is not given, as the discrete input ``shell_mesh`` (e.g. from a
 :class:`~shellmesh_mdao.components.group.ShellMeshGroup`, a new mesh every design point); the
 thickness order is then the option ``family_names`` or, from the option ``layout``,
-:func:`~shellmesh_mdao.components.layout_comp.family_names`, and each mesh family takes the
-thickness of the family of the same name.
+:func:`~shellmesh_mdao.components.layout_comp.family_names` (fixed by the layout), and each
+mesh family takes the thickness of the family of the same name or of its nearest listed
+parent (a piece of a kinked or crossed spar of a station-given wing, ``w/spar_0/part_1/seg_2``,
+that of ``w/spar_0``): :func:`mesh_family_positions`.
 """
 from __future__ import annotations
 
@@ -22,8 +24,9 @@ from ..errors import ShellMeshError
 from ..export import DEFAULT_THICKNESS
 from ..families import padded_names
 from ..mesh import ShellMesh
+from .layout_comp import family_index, family_names
 
-__all__ = ["MassComp"]
+__all__ = ["MassComp", "discrete_family_names", "mesh_family_positions", "mapped_family_areas"]
 
 
 class MassComp(om.ExplicitComponent):
@@ -37,7 +40,8 @@ class MassComp(om.ExplicitComponent):
     thickness : initial thickness of every family (default 0.002, mesh length units).
     density : initial density (default 2700, aluminium, mass per volume in mesh units).
 
-    Inputs ``thickness`` (n_families,), ``density`` (scalar); output ``mass`` (scalar).
+    Inputs ``thickness`` (n_families,: :attr:`family_names` order; the mesh's own
+    ``component_names`` with the option ``mesh``), ``density`` (scalar); output ``mass`` (scalar).
     Partials are exact: d mass / d t_i = density * area_i, d mass / d density = areas . t.
     """
 
@@ -62,7 +66,7 @@ class MassComp(om.ExplicitComponent):
             self._areas, self._areas_of = np.zeros(len(self.family_names)), None
         n = len(self._areas)
         self.add_input("thickness", val=np.full(n, float(self.options["thickness"])), shape=(n,),
-                       desc="shell thickness of each family, in mesh.component_names order")
+                       desc="shell thickness of each family, in family_names order")
         self.add_input("density", val=float(self.options["density"]), desc="material density")
         self.add_output("mass", val=0.0, desc="mass of all shells")
         self.declare_partials("mass", "thickness")
@@ -74,7 +78,7 @@ class MassComp(om.ExplicitComponent):
             if mesh is None:
                 raise om.AnalysisError(f"{self.msginfo}: no shell_mesh: connect a ShellMeshGroup's shell_mesh")
             if self._areas_of is not mesh:
-                self._areas = mapped_family_values(self, mesh, family_areas(mesh))
+                self._areas = mapped_family_areas(self, mesh)
                 self._areas_of = mesh
         return self._areas
 
@@ -92,8 +96,6 @@ def discrete_family_names(comp, what: str) -> list:
     ``family_names`` option, else the families of its ``layout`` option."""
     names = comp.options["family_names"]
     if names is None and comp.options["layout"] is not None:
-        from .layout_comp import family_names
-
         names = family_names(comp.options["layout"])
     if not names:
         raise ShellMeshError(f"{what} needs the mesh: give mesh=ShellMesh, or family_names=[...] (or layout=...) "
@@ -104,21 +106,31 @@ def discrete_family_names(comp, what: str) -> list:
     return names
 
 
-def mapped_family_values(comp, mesh: ShellMesh, values) -> np.ndarray:
-    """Per-family ``values`` of ``mesh`` (in ``mesh.component_names`` order) rearranged into the
-    component's ``family_names`` order (0 for families the mesh does not have). A mesh family
-    with faces that ``family_names`` does not name is a :class:`ShellMeshError`."""
-    names = comp.family_names
-    pos = {n: i for i, n in enumerate(names)}
-    values = np.asarray(values, dtype=np.float64)
-    out = np.zeros(len(names))
-    counts = np.bincount(mesh.component, minlength=len(values)) if mesh.n_faces else np.zeros(len(values), int)
-    mesh_names = padded_names(mesh.component_names, len(values))
-    for i, n in enumerate(mesh_names):
-        if n in pos:
-            out[pos[n]] += values[i]
-        elif counts[i]:
-            raise ShellMeshError(f"{comp.msginfo}: the mesh has a family '{n}' ({int(counts[i])} faces) that "
-                                 f"family_names does not name; add it to family_names (or build the mesh "
-                                 "with the layout given to this component)")
-    return out
+def mesh_family_positions(comp, mesh: ShellMesh) -> np.ndarray:
+    """Position in the component's ``family_names`` of each family of ``mesh`` (in
+    ``mesh.component_names`` order, padded): its own name or its nearest listed parent
+    (:func:`~shellmesh_mdao.components.layout_comp.family_index`: a spar piece
+    ``w/spar_0/part_1/seg_2`` takes the thickness of ``w/spar_0``), -1 for a family without faces
+    that is not listed. A mesh family with faces that neither it nor a parent is listed is a
+    :class:`ShellMeshError`."""
+    nm = n_families(mesh)
+    names = padded_names(mesh.component_names, nm)
+    pos = family_index(comp.family_names, names)
+    counts = np.bincount(mesh.component, minlength=nm) if mesh.n_faces else np.zeros(nm, np.int64)
+    bad = np.flatnonzero((pos < 0) & (counts > 0))
+    if len(bad):
+        n, i = names[bad[0]], bad[0]
+        raise ShellMeshError(f"{comp.msginfo}: the mesh has a family '{n}' ({int(counts[i])} faces) that "
+                             f"family_names does not name; add it to family_names (or build the mesh "
+                             "with the layout given to this component)")
+    return pos
+
+
+def mapped_family_areas(comp, mesh: ShellMesh) -> np.ndarray:
+    """Face area of each of the component's ``family_names`` in ``mesh`` (summed over the mesh
+    families each one stands for, :func:`mesh_family_positions`; 0 for a family without
+    faces)."""
+    pos = mesh_family_positions(comp, mesh)
+    if not mesh.n_faces:
+        return np.zeros(len(comp.family_names))
+    return np.bincount(pos[mesh.component], weights=mesh.face_areas(), minlength=len(comp.family_names))
