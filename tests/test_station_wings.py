@@ -165,10 +165,26 @@ def test_fewer_than_two_spars(wing):
     w = lay.station_wings[0]
     assert [m.name for m in lay.members()][:3] == ["w/le_web", "w/spar_0", "w/te_web"]
     assert any("edge webs" in n and f"{MIN_EDGE_ANGLE:.1f}" in n for n in w.notes)
-    blunt = naca_wing(te_thickness=0.03)
+    blunt = naca_wing(te_thickness=0.12)                                 # a base above the element size
     lay = resolve(blunt, layout(spars={"chord_fractions": [0.35]}, ribs={"count": 4}))
     ribs = [m for m in lay.members() if "/rib_" in m.name]
     assert all(r.kind == "rib" and not r.bound_planes for r in ribs)     # closed sections
+    assert not lay.station_wings[0].notes
+
+
+def test_blunt_trailing_edge_below_the_element_size_is_sharp():
+    """A blunt trailing edge whose base is lower than the element size is, at that size, the
+    wedge of its upper and lower skin (the skin cannot hold the base): with one spar the ribs
+    end on edge webs, not on that wedge; at a size below the base they are closed sections."""
+    thin = naca_wing(te_thickness=0.03)                # base 0.06 at the root, 0.03 at the tip
+    d = layout(spars={"chord_fractions": [0.35]}, ribs={"count": 4})
+    assert resolve(thin, d).station_wings[0].planform.shapes[0].blunt
+    lay = resolve(thin, d, size=0.1)
+    assert [m.name for m in lay.members()][:3] == ["w/le_web", "w/spar_0", "w/te_web"]
+    assert any("trailing edge is sharper" in n for n in lay.station_wings[0].notes)
+    assert all(m.bound_planes for m in lay.members() if "/rib_" in m.name)  # the ribs end on the webs
+    lay = resolve(thin, d, size=0.025)
+    assert all(not m.bound_planes for m in lay.members() if "/rib_" in m.name)
     assert not lay.station_wings[0].notes
 
 
@@ -201,6 +217,21 @@ def test_station_wing_end_to_end(wing):
     assert {"w/spar_0", "w/spar_1", "w/rib_0", "w/rib_5"} <= names
     assert r.report["wings"]["w"]["root"] == pytest.approx(0.2)
     assert r.report["inputs"]["layout"]["wings"][0]["root"] == 0.2
+
+
+def test_cranked_wing_with_a_thin_blunt_trailing_edge_meshes():
+    """A swept, cranked wing whose blunt trailing edge is far lower than the element size (a CAD
+    wing such as the uCRM) with one spar: its ribs end on edge webs and it meshes, every
+    guarantee met (full-chord ribs through that edge were refused at the members stage: the
+    rib outline on the skin has a corner of the edge's wedge, about 10 deg)."""
+    from shellmesh_mdao.guarantees import check_guarantees
+    from shellmesh_mdao.pipeline import run_pipeline
+
+    S = naca_wing(naca="0005", te_thickness=0.003, tip_chord=1.2, crank=(0.35, 1.4), sweep_deg=30.0)
+    r = run_pipeline(S, layout(spars={"chord_fractions": [0.35]}, ribs={"count": 4}), SIZE, progress=False)
+    assert check_guarantees(r)["min_scaled_jacobian"] > 0.2
+    assert {"w/le_web", "w/te_web"} <= {n.split("/part_")[0] for n in r.mesh.component_names}
+    assert any("edge webs" in n for n in r.report["wings"]["w"]["notes"])
 
 
 def test_fin_and_fractions_along_the_span(wing):

@@ -34,7 +34,9 @@ step by step (a fan at the root and tip of a swept wing) until they do. A rib ru
 first to its last spar (T-junctions) and crosses the spars between (X-junctions).
 
 **Fewer than two spars.** The ribs run from the leading to the trailing edge as closed
-sections (full-chord ribs) when both edges are round or blunt. A quad at a wedge sharper than
+sections (full-chord ribs) when both edges are round or blunt (a blunt trailing edge's base at
+least :data:`MIN_BASE` element sizes tall; a lower base is the wedge of the upper and lower skin at
+that size: :func:`_edge_angles`). A quad at a wedge sharper than
 :data:`MIN_EDGE_ANGLE` cannot reach the pipeline's scaled-Jacobian guarantee, so when an edge
 is that sharp at some station the wing gets two **edge webs**, ``<wing>/le_web`` and
 ``<wing>/te_web``, where the wing is half its largest thickness (the most aft / most forward
@@ -60,7 +62,7 @@ from .schema import Layout, MemberSpec
 from .stations import StationWing
 
 __all__ = ["resolve_layout", "resolve_station_wing", "PlanformLine", "MIN_WEB_HEIGHT", "MIN_EDGE_ANGLE",
-           "SPAR_TOL", "PLANFORM_TOL"]
+           "MIN_BASE", "SPAR_TOL", "PLANFORM_TOL"]
 
 #: a spar or web must be at least this many element sizes tall (the project stage's rule for
 #: corner-given spars, ``project.MIN_MEMBER_HEIGHT``; the layout stage cannot import it)
@@ -69,6 +71,11 @@ MIN_WEB_HEIGHT = 0.3
 #: angle a has a scaled Jacobian of at most sin(a), and the pipeline guarantees above 0.2, so
 #: 11.5 deg; half as much again for the measurement (one element size from the edge)
 MIN_EDGE_ANGLE = 1.5 * float(np.degrees(np.arcsin(0.2)))
+#: a blunt trailing edge is a face of the skin (full-chord ribs end on it) only where its base is
+#: at least this many element sizes tall: the remesh keeps two feature lines apart only when they
+#: are more than twice its chordal deviation apart (0.4 sizes by default) and merges them
+#: otherwise, and then the rib's outline ends in the wedge of the upper and lower skin
+MIN_BASE = 1.0
 #: spars are straightened to this many element sizes of their local-fraction curve
 SPAR_TOL = 0.25
 #: the planform is measured to this many element sizes
@@ -269,7 +276,10 @@ def _layout_ribs(box: _Box, bounds, c_mid, ref, T0=None):
 
 def _edge_angles(pf: Planform, size: float) -> tuple:
     """Smallest leading- and trailing-edge wedge angles (degrees) over the measured stations,
-    each measured one element size from the edge (a blunt trailing edge: 180)."""
+    each measured one element size from the edge. A blunt trailing edge whose base is at least
+    :data:`MIN_BASE` element sizes tall counts 180; a lower base is below what the skin resolves
+    at that size (the remesh merges its two corner lines into one), so there the edge is the
+    wedge of the upper and lower skin, measured from the base's corners."""
     le_min, te_min = 180.0, 180.0
     for s in pf.shapes:
         f = min(max(size / s.chord, 1e-4), 0.25)
@@ -277,7 +287,7 @@ def _edge_angles(pf: Planform, size: float) -> tuple:
         d = f * s.chord
         le_ang = np.degrees(np.arctan2(hu[0], d) - np.arctan2(hl[0], d))
         le_min = min(le_min, float(le_ang))
-        if not s.blunt:
+        if not s.blunt or s.upper[-1] - s.lower[-1] < MIN_BASE * size:
             te_ang = np.degrees(np.arctan2(hu[1] - s.upper[-1], d) - np.arctan2(hl[1] - s.lower[-1], d))
             te_min = min(te_min, float(te_ang))
     return le_min, te_min
