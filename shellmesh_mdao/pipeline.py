@@ -46,7 +46,10 @@ class PipelineState:
     """What travels between stages. ``stage`` is the last stage run; fields a stage has not
     produced yet are None. ``mesh`` is the current mesh (the skin until ``members``, then skin
     and members together); ``surface`` and ``locator`` are the ORIGINAL input skin and its BVH;
-    ``supports`` say where each node of ``mesh`` may move (from ``split`` on)."""
+    ``supports`` say where each node of ``mesh`` may move (from ``split`` on); ``size_field``
+    (from ``project`` on) the local element sizes asked for below ``size``
+    (:class:`~shellmesh_mdao.core.sizefield.SizeField`, in quad sizes; empty: ``size``
+    everywhere)."""
 
     size: float
     options: PipelineOptions
@@ -60,6 +63,7 @@ class PipelineState:
     chains: list = field(default_factory=list)
     infos: list | None = None
     supports: object = None
+    size_field: object = None
     stage: str = ""
 
     def but(self, **kw) -> "PipelineState":
@@ -196,18 +200,32 @@ def stage_layout(state: PipelineState, layout) -> PipelineState:
 
 def stage_project(state: PipelineState) -> PipelineState:
     """Cast every member's seed points onto the input skin and derive the curves to imprint;
-    refuse spars too thin for the element size (:func:`~shellmesh_mdao.project.check_member_heights`)."""
+    refuse spars too thin for the element size (:func:`~shellmesh_mdao.project.check_member_heights`);
+    the local element size between members closer than ``size``
+    (:func:`~shellmesh_mdao.project.close_member_field`; the report's ``size_field``)."""
     from .imprint import chain_specs
-    from .project import check_member_heights, project_layout
+    from .project import check_member_heights, close_member_field, project_layout
 
     _need(state, "project")
     projected = project_layout(state.locator, state.layout)
     check_member_heights(state.locator, state.layout, state.size)
-    return state.but(projected=projected, specs=chain_specs(state.layout, projected), stage="project")
+    field = close_member_field(state.locator, state.layout, state.size)
+    st = state.but(projected=projected, specs=chain_specs(state.layout, projected), size_field=field,
+                   stage="project")
+    st.report["size_field"] = field.summary(state.size)
+    return st
+
+
+def _working_field(state: PipelineState):
+    """The state's size field in the working units of the remesh, imprint and members stages
+    (``REMESH_FACTOR`` times the quad size); None when it asks for nothing."""
+    f = state.size_field
+    return None if f is None or f.empty else f.scaled(REMESH_FACTOR)
 
 
 def stage_remesh(state: PipelineState, cache=None) -> PipelineState:
-    """Isotropic, curvature-adapted remesh of the skin at ``REMESH_FACTOR * size``. ``cache``: a
+    """Isotropic, curvature-adapted remesh of the skin at ``REMESH_FACTOR * size``, finer where the
+    state's size field asks for it. ``cache``: a
     :class:`~shellmesh_mdao.remesh.RemeshCache` to look the skin up in first and store it in (the
     report of a state built from it has ``remesh_cache = {"hit": True, "seconds": <the original
     remesh's time>}``); None remeshes."""
@@ -217,14 +235,15 @@ def stage_remesh(state: PipelineState, cache=None) -> PipelineState:
     o = state.options.remesh
     if not o.remesh:
         return state.but(mesh=state.surface, stage="remesh")
-    key = cache.key(state.surface, state.size, state.options) if cache is not None else None
+    field = _working_field(state)
+    key = cache.key(state.surface, state.size, state.options, field) if cache is not None else None
     hit = cache.get(key) if cache is not None else None
     if hit is not None:
         st = state.but(mesh=hit.mesh, stage="remesh")
         st.report["remesh_cache"] = {"hit": True, "seconds": hit.seconds}
         return st
     t0 = time.perf_counter()
-    skin = remesh_skin(state.surface, REMESH_FACTOR * state.size, o, locator=state.locator)
+    skin = remesh_skin(state.surface, REMESH_FACTOR * state.size, o, locator=state.locator, size_field=field)
     if cache is not None:
         cache.put(key, skin, time.perf_counter() - t0)
     return state.but(mesh=skin, stage="remesh")
@@ -236,7 +255,7 @@ def stage_imprint(state: PipelineState) -> PipelineState:
 
     _need(state, "imprint")
     mesh, chains = imprint_mesh(state.mesh, state.surface, state.specs, REMESH_FACTOR * state.size,
-                                state.options.imprint, locator=state.locator)
+                                state.options.imprint, locator=state.locator, size_field=_working_field(state))
     mesh = skin_families(mesh, state.layout)
     st = state.but(mesh=mesh, chains=chains, stage="imprint")
     st.report["members"] = chain_report(mesh, chains)
@@ -254,7 +273,8 @@ def stage_members(state: PipelineState) -> PipelineState:
     infos = member_infos(state.layout)
     # members are flat or gently curved: meshed at the skin's flat-region edge length, graded
     # to the chain spacing at their boundary
-    mesh = build_members(state.mesh, state.chains, infos, REMESH_FACTOR * state.size)
+    mesh = build_members(state.mesh, state.chains, infos, REMESH_FACTOR * state.size,
+                         size_field=_working_field(state))
     st = state.but(mesh=mesh, infos=infos, stage="members")
     members = {k: dict(v) for k, v in st.report.get("members", {}).items()}
     for name, s in member_statistics(mesh, infos).items():

@@ -140,9 +140,9 @@ def test_projection_comp(states):
     p.run_model()
     assert comp.loaded_state() is loaded and comp.n_runs == 2
     assert p.get_val("c.state").layout.wings[0].rib_eta == (0.0, 0.4, 1.0)
-    # rib spacing below the element size: a failed case
-    p.set_val("src.layout", lay.with_parameters(rib_eta={"wing": [0.0, 0.02, 1.0]}))
-    with pytest.raises(om.AnalysisError, match="closer than the element size"):
+    # ribs that coincide at the element size (0.11 of it apart): a failed case
+    p.set_val("src.layout", lay.with_parameters(rib_eta={"wing": [0.0, 0.005, 1.0]}))
+    with pytest.raises(om.AnalysisError, match="members coincide or cross at element size"):
         p.run_model()
 
 

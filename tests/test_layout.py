@@ -173,13 +173,22 @@ def test_with_parameters():
 
 
 def test_validate_size():
-    lay = load_layout(base(ribs={"eta": [0.0, 0.5, 0.51, 1.0]}))
+    """Ribs (spars) closer than the element size are meshed with smaller elements between them;
+    only members that coincide at the size (closer than MIN_MEMBER_GAP element sizes) are
+    refused, every pair in one error, with the size below which they would mesh."""
+    lay = load_layout(base(ribs={"eta": [0.0, 0.5, 0.51, 1.0]}))      # 0.0503 apart
     lay.validate(0.01)
-    with pytest.raises(LayoutError, match=r"ribs 'w/rib_1' \(eta=0.5\) and 'w/rib_2' \(eta=0.51\)"):
-        lay.validate(0.1)
-    lay = load_layout(base(spars={"chord_fractions": [0.2, 0.25, 0.7]}))
-    with pytest.raises(LayoutError, match=r"spars 'w/spar_0' \(c=0.2\) and 'w/spar_1' \(c=0.25\)"):
-        lay.validate(0.09)
+    lay.validate(0.1)
+    with pytest.raises(LayoutError, match=r"members coincide or cross at element size 0.3 \(closer than 0.2 element "
+                                          r"sizes, 0.06\): ribs 'w/rib_1' \(eta=0.5\) and 'w/rib_2' \(eta=0.51\) are "
+                                          r"0.0503 apart: .* or use an element size below 0.2515"):
+        lay.validate(0.3)
+    lay = load_layout(base(ribs={"eta": [0.0, 0.5, 0.51, 1.0]}, spars={"chord_fractions": [0.2, 0.25, 0.7]}))
+    lay.validate(0.09)
+    with pytest.raises(LayoutError, match=r"ribs 'w/rib_1' \(eta=0.5\) and 'w/rib_2' \(eta=0.51\) are 0.0503 apart; "
+                                          r"spars 'w/spar_0' \(c=0.2\) and 'w/spar_1' \(c=0.25\) are 0.05 apart: remove "
+                                          r"one member of each pair"):
+        lay.validate(0.3)
     for bad in (0, -1.0, float("nan"), "1"):
         with pytest.raises(SizeError):
             lay.validate(bad)

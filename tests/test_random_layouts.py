@@ -50,8 +50,11 @@ def test_draw_ranges_and_determinism(manifest, geometry_dir):
 
 
 def test_classifier_on_known_messages(manifest, geometry_dir):
-    assert SL.is_documented("ribs 'wing/rib_3' (eta=0.31) and 'wing/rib_4' (eta=0.33) are 0.01 apart, closer "
-                            "than the element size 0.02: use fewer ribs or a smaller element size")
+    assert SL.is_documented("members coincide or cross at element size 0.1 (closer than 0.2 element sizes, 0.02): "
+                            "ribs 'wing/rib_3' (eta=0.31) and 'wing/rib_4' (eta=0.3101) are 0.0005 apart; spars "
+                            "'wing/spar_0' (c=0.2) and 'wing/spar_1' (c=0.201) are 0.002 apart: remove one member of "
+                            "each pair or move them apart (members at least 0.2 element sizes apart are meshed, with "
+                            "smaller elements between them), or use an element size below 0.0025")
     assert SL.is_documented("wing/spar_0 (upper): its plane cuts the surface only outside the member's bounds; "
                             "check the layout's stations and chord fractions")
     assert not SL.is_documented("index 7 is out of bounds for axis 0 with size 3")
@@ -74,12 +77,16 @@ def test_classifier_on_known_messages(manifest, geometry_dir):
                               "within two skin edges of 'w/spar_0']",
                                "imprint", dict(inside, tight=""))[0] == "FAIL"
     assert SL.classify_refusal("ImprintError", "something new went wrong", "imprint", inside)[0] == "FAIL"
-    # ribs 0.001 apart on the straight wing (span 3.9): 0.0039 apart, below the size 0.02
+    # ribs 0.001 apart on the straight wing (span 3.9): 0.0039 apart, 0.195 of the size 0.02: they coincide
     case = {"seed": -1, "geometry": "straight_wing", "ribs": [0.0, 0.5, 0.501, 1.0], "spars": [0.2, 0.6],
             "size": 0.02, "size_factor": 1.0}
     r = SL.run_case(case, geometry_dir, manifest)
     assert r["outcome"] == "invalid layout" and r["stage"] == "layout", r
-    assert r["error"].startswith("LayoutError: ribs ") and "ribs closer than the element size" in r["reason"]
+    assert r["error"].startswith("LayoutError: members coincide or cross at element size 0.02") and \
+        "members that coincide at this size (smallest rib gap 0.195 h" in r["reason"]
+    # the validator's refusal is backed only by an independent gap below 0.2 element sizes
+    msg = r["error"].split(": ", 1)[1]
+    assert SL.classify_refusal("LayoutError", msg, "layout", {"rib_gap": 0.5, "spar_gap": 3.0})[0] == "FAIL"
     # a spar web lower than 0.3 element sizes (straight wing, c=0.03: 0.0036 tall at size 0.02) is refused by
     # the project stage, and the independent ray casts agree that the web is low (tight)
     case = dict(case, ribs=[0.0, 0.5, 1.0], spars=[0.03, 0.5])

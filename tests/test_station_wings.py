@@ -191,8 +191,12 @@ def test_blunt_trailing_edge_below_the_element_size_is_sharp():
 def test_checks_before_meshing(wing):
     with pytest.raises(LayoutError, match=r"spar 'w/spar_1' .* tall .* move the spar away from the trailing edge"):
         resolve(wing, layout(spars={"chord_fractions": [0.15, 0.97]}))
-    with pytest.raises(LayoutError, match=r"ribs 'w/rib_\d+' and 'w/rib_\d+' are .* closer than the element size"):
-        resolve(wing, layout(ribs={"count": 60}))
+    # 60 ribs 0.095 apart at size 0.1 are laid out (and meshed with smaller elements between them);
+    # 400 coincide at that size: every pair is named
+    assert not resolve(wing, layout(ribs={"count": 60})).station_wings[0].close_pairs
+    with pytest.raises(LayoutError, match=r"members coincide or cross at element size 0.1 .*ribs 'w/rib_0' and 'w/rib_1' "
+                                          r"are .* apart at a spar; .*ribs 'w/rib_398' and 'w/rib_399' are .* apart"):
+        resolve(wing, layout(ribs={"count": 400}))
     two = {"wings": [dict(WING, name="a"), dict(WING, name="b", root=3.0, tip=5.0)]}
     with pytest.raises(LayoutError, match="wing 'a' reaches into wing 'b'|wing 'b' reaches into wing 'a'"):
         resolve(wing, two)

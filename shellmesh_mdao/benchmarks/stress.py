@@ -25,7 +25,8 @@ it as
 * ``invalid layout``: a :class:`~shellmesh_mdao.errors.ShellMeshError` whose message is a
   documented message of docs/troubleshooting.md AND that the layout genuinely deserves,
   checked independently of the package (:func:`layout_tightness`): a rib gap or spar gap
-  below the element size for the validator's LayoutError, or, for a refusal by a later stage
+  below :data:`~shellmesh_mdao.layout.MIN_MEMBER_GAP` element sizes for the validator's LayoutError
+  (members that coincide at that size; closer members are meshed), or, for a refusal by a later stage
   (imprint, members, ...), a layout that is *tight*: members closer than
   :data:`TIGHT` element sizes to each other or a spar that close to the leading/trailing
   edge, or a single rib with spars (the spars, bounded by the first and the last rib, have
@@ -51,6 +52,7 @@ import numpy as np
 from ..errors import ShellMeshError
 from ..families import rib_name, spar_name
 from ..guarantees import check_guarantees
+from ..layout import MIN_MEMBER_GAP
 from .child import failing_stage, run_in_child
 from .corpus import CORPUS_SIZES
 
@@ -392,8 +394,10 @@ def classify_refusal(cls: str, message: str, stage: str, t: dict) -> tuple:
     None for inf). "invalid layout" only when the message is documented and the layout
     genuinely deserves it:
 
-    * the validator (stage "layout", LayoutError/SizeError): ribs (spars) closer than the
-      element size, confirmed by the independent rib (spar) gap < 1 h;
+    * the validator (stage "layout", LayoutError/SizeError): members that coincide at this size
+      (ribs, spars or both named), confirmed by the independent rib (spar) gap below
+      :data:`~shellmesh_mdao.layout.MIN_MEMBER_GAP` element sizes for every kind it names (members
+      from there up to one element size apart are meshed, not refused);
     * ProjectionError: a member outside the wing (``outside``) or zero-length spars;
     * any other documented error of a later stage (imprint, members, ...): a tight layout
       (:data:`TIGHT`); a refusal that names its own cause needs that cause's independent
@@ -405,11 +409,11 @@ def classify_refusal(cls: str, message: str, stage: str, t: dict) -> tuple:
     if not is_documented(message):
         return "FAIL", "undocumented error message (not in docs/troubleshooting.md)"
     if stage == "layout" and cls in ("LayoutError", "SizeError"):
-        if message.startswith("ribs ") and "closer than the element size" in message:
-            ok, why = g["rib_gap"] < 1.0, f"ribs closer than the element size (smallest rib gap {g['rib_gap']:.2f} h)"
-        elif message.startswith("spars ") and "closer than the element size" in message:
-            ok, why = g["spar_gap"] < 1.0, \
-                f"spars closer than the element size (smallest spar gap {g['spar_gap']:.2f} h)"
+        kinds = [k for k in ("rib", "spar") if f"{k}s '" in message]
+        if message.startswith("members coincide or cross at element size") and kinds:
+            ok = all(g[f"{k}_gap"] < MIN_MEMBER_GAP for k in kinds)
+            why = "members that coincide at this size (" + ", ".join(
+                f"smallest {k} gap {g[f'{k}_gap']:.3f} h" for k in kinds) + f"; below {MIN_MEMBER_GAP:g} h)"
         else:
             ok, why = False, "the validator refused a layout drawn valid"
         if ok:

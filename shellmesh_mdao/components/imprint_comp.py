@@ -2,7 +2,8 @@
 
 Core functions: the ``remesh`` and ``imprint`` stages of :mod:`shellmesh_mdao.pipeline`. The
 remeshed skin does not depend on the layout, only on the input surface, the size and the solver
-options, so the component keeps it in a :class:`~shellmesh_mdao.remesh.RemeshCache` (the pipeline
+options (and the local sizes between members closer than the size, when there are such members), so
+the component keeps it in a :class:`~shellmesh_mdao.remesh.RemeshCache` (the pipeline
 layer's cache, which :func:`~shellmesh_mdao.pipeline.run_pipeline` uses too) and a DOE over rib
 stations or spar chord fractions remeshes once (see docs/openmdao.md for the measured saving).
 """

@@ -8,7 +8,7 @@ component families a layout gives, i.e. the order of the ``thickness`` vector of
 analysis components, and :func:`family_index`, which mesh family takes which thickness).
 
 Failed design points. A design point that cannot be meshed (rib stations out of order or
-closer than the element size, a member that cannot be imprinted at this size, ...) raises a
+coinciding at the element size, a member that cannot be imprinted at this size, ...) raises a
 :class:`~shellmesh_mdao.errors.ShellMeshError` in the core function; the stage component
 re-raises it as ``om.AnalysisError`` with the same message (prefixed by the component's
 path). ``DOEDriver`` records such a case with ``success = 0`` and the message in ``msg``

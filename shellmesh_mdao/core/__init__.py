@@ -9,7 +9,8 @@ input skin), :mod:`.section` (exact plane sections of a triangulation), :mod:`.s
 may move: input skin, member planes, feature curves), :mod:`.topology` (faces around vertices, rings,
 fixed edges), :mod:`.polyline` and :mod:`.polygon` (polylines and 2-D polygons), :mod:`.highs` (HiGHS
 LP/MIP calls), :mod:`.threads` (a call in a thread of its own), :mod:`.formats` (the INP ELSET naming
-rule of the reader and the writer). Import them by module; this package itself exports nothing.
+rule of the reader and the writer), :mod:`.sizefield` (:class:`~.sizefield.SizeField`: local element
+sizes asked for at points, graded back to the element size). Import them by module; this package itself exports nothing.
 """
 
 __all__: list[str] = []

@@ -205,8 +205,11 @@ def _apply_collapses(P, T, C, fe, fid, fixed, chain_vs, v, u):
 
 def coarsen_chains(mesh: ShellMesh, locator, chains, target: float, max_ratio: float = 1.3,
                    min_angle: float = 10.0, near: float = 0.35, rounds: int = 40,
-                   max_deviation: float | None = None, keep=None, improve: bool = True) -> ShellMesh:
-    """Coarsen the imprinted chains towards the spacing ``target`` (the skin edge length).
+                   max_deviation: float | None = None, keep=None, improve: bool = True,
+                   size_field=None) -> ShellMesh:
+    """Coarsen the imprinted chains towards the spacing ``target`` (the skin edge length; where a
+    ``size_field``, a :class:`~shellmesh_mdao.core.sizefield.SizeField` in the same units, asks for
+    less, that local size).
 
     Interior chain vertices (not crossings, chain ends, vertices shared with a crease, nor
     ``keep``) are removed by collapsing each into a chain neighbour, shortest resulting chain
@@ -270,7 +273,8 @@ def coarsen_chains(mesh: ShellMesh, locator, chains, target: float, max_ratio: f
                     v, u, w = np.concatenate(vs), np.concatenate(us), np.concatenate(ws)
                     cix, pos, dv = np.concatenate(cis), np.concatenate(pss), np.concatenate(dvs)
                     prio = norm_rows(P[w] - P[u], axis=1)
-                    sel = (prio <= lmax) & (dv <= dmax)
+                    lim = lmax if size_field is None else max_ratio * size_field.at(0.5 * (P[w] + P[u]), target)
+                    sel = (prio <= lim) & (dv <= dmax)
                     v, u, w, prio, cix, pos, dv = v[sel], u[sel], w[sel], prio[sel], cix[sel], pos[sel], dv[sel]
                 else:
                     on_chain = np.zeros(n, bool)
@@ -283,7 +287,7 @@ def coarsen_chains(mesh: ShellMesh, locator, chains, target: float, max_ratio: f
                     sel = (kind[v] == FREE) & ~fixed[v] & ~hold[v] & on_chain[u]
                     v, u = v[sel], u[sel]
                     prio = norm_rows(P[v] - P[u], axis=1)
-                    sel = prio < near * float(target)
+                    sel = prio < near * (float(target) if size_field is None else size_field.at(P[u], target))
                     v, u, prio = v[sel], u[sel], prio[sel]
                     w = cix = pos = dv = np.zeros(len(v), np.int64)
                 if not len(v):

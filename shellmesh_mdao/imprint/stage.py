@@ -13,13 +13,15 @@ __all__ = ["imprint_mesh"]
 
 
 def imprint_mesh(skin: ShellMesh, surface: ShellMesh, specs, target_edge: float,
-                 options: ImprintOptions = ImprintOptions(), *, locator) -> tuple[ShellMesh, list]:
+                 options: ImprintOptions = ImprintOptions(), *, locator, size_field=None) -> tuple[ShellMesh, list]:
     """The pipeline's imprint stage on the (remeshed) ``skin``: the chains of ``specs``
     (:class:`~shellmesh_mdao.imprint.ChainSpec`) cut into it (:func:`imprint_chains` with the
     option ``snap``), their edges split where the exact section bulges more than
     ``chain_deviation`` times ``target_edge`` (the remesh edge length) from them, or more than
     ``chain_depth_deviation`` of their member's depth (:func:`refine_chains`; not at all with
-    ``chain_deviation`` 0), the chains coarsened toward ``target_edge`` (:func:`coarsen_chains`)
+    ``chain_deviation`` 0), the chains coarsened toward ``target_edge`` (:func:`coarsen_chains`; toward
+    the local size where ``size_field``, a :class:`~shellmesh_mdao.core.sizefield.SizeField` in the
+    units of ``target_edge``, asks for less)
     and the skin edges joining two vertices of one member's chains split
     (:func:`split_member_bridges`). ``surface``: the input skin, on which every new vertex
     lies; ``locator``: its :class:`~shellmesh_mdao.project.SurfaceLocator`; ``options``: the
@@ -32,6 +34,6 @@ def imprint_mesh(skin: ShellMesh, surface: ShellMesh, specs, target_edge: float,
     if options.chain_deviation > 0:
         mesh = refine_chains(mesh, chains, options.chain_deviation * target_edge,
                              depth_fraction=options.chain_depth_deviation)
-    mesh = coarsen_chains(mesh, locator, chains, target_edge)
+    mesh = coarsen_chains(mesh, locator, chains, target_edge, size_field=size_field)
     mesh = split_member_bridges(mesh, chains, locator)
     return mesh, chains

@@ -44,10 +44,35 @@ from .stations import END_RIBS, RIB_ORIENTATIONS, StationWing, parse_station_win
 
 __all__ = ["Layout", "WingLayout", "StationWing", "ExplicitMember", "MemberSpec", "load_layout",
            "layout_from_manifest", "explicit_plane", "resample_polyline", "MIN_UP_SPAN_ANGLE_DEG", "RIB_ORIENTATIONS",
-           "END_RIBS"]
+           "END_RIBS", "MIN_MEMBER_GAP", "coincident_parts"]
 
 #: ``up`` must make at least this angle with the span line (else the rib normal is undefined).
 MIN_UP_SPAN_ANGLE_DEG = 10.0
+
+#: two neighbouring ribs (spars) closer than this many element sizes coincide at that size and are
+#: refused; from there up to one element size apart they are meshed with a local element size about
+#: their gap (the project stage's :func:`~shellmesh_mdao.project.close_member_field`). The remesh's
+#: smallest edge (``remesh.DEFAULT_MIN_EDGE_FRACTION`` of its edge length, twice the element size)
+#: is 0.2 element sizes.
+MIN_MEMBER_GAP = 0.2
+
+
+def coincident_parts(pairs) -> tuple:
+    """The parts of the one error naming every pair of members that coincide (or cross) at an
+    element size: ``(pairs text, fix)``; ``pairs`` a list of ``(text, gap)`` (``gap`` None for
+    members that cross), each text naming the two members and how close they are. The callers
+    (:meth:`Layout.validate`, :func:`~shellmesh_mdao.layout.resolve_layout`) raise
+    ``members coincide or cross at element size {size} (closer than ...): {text}: {fix}``."""
+    txt = "; ".join(t for t, _ in pairs)
+    gaps = [g for _, g in pairs if g is not None]
+    fix = f"remove one member of each pair or move them apart (members at least {MIN_MEMBER_GAP:g} element sizes " \
+          "apart are meshed, with smaller elements between them)"
+    if len(gaps) == len(pairs) and min(gaps) > 0:
+        fix += f", or use an element size below {min(gaps) / MIN_MEMBER_GAP:.4g}"
+    elif len(gaps) < len(pairs):
+        fix += "; ribs that cross: fewer ribs, or ribs.orientation nearer the station direction"
+    return txt, fix
+
 
 _TOP_KEYS = ("wings", "members", "up")
 _WING_KEYS = ("name", "root_le", "root_te", "tip_le", "tip_te", "up", "ribs", "spars")
@@ -324,11 +349,42 @@ class Layout:
         return [w.name for w in self.wings] + [w.name for w in self.station_wings]
 
     # ------------------------------------------------------------ checks
+    def coincident_pairs(self, size: float) -> list:
+        """Every pair of neighbouring members that coincide at element ``size`` (closer than
+        :data:`MIN_MEMBER_GAP` element sizes) or cross: ``(text, gap)`` (``gap`` None for members
+        that cross), corner-given wings from their rib planes and spar chord points at root and
+        tip, station-given wings as their resolution found them (``StationWing.close_pairs``)."""
+        size = float(size)
+        pairs = []
+        for w in self.wings:
+            up = self.wing_up(w)
+            n = w.rib_normal(up)
+            if len(w.rib_eta) >= 2:
+                specs = [m for m in _wing_members(w, up) if m.kind == "rib"]
+                off = np.array([m.plane_point @ n for m in specs])
+                gap = np.diff(off)
+                for k in np.flatnonzero(gap < MIN_MEMBER_GAP * size):
+                    pairs.append((f"ribs '{specs[k].name}' (eta={w.rib_eta[k]:g}) and '{specs[k + 1].name}' "
+                                  f"(eta={w.rib_eta[k + 1]:g}) are {gap[k]:.4g} apart", float(gap[k])))
+            if len(w.spar_chord) >= 2:
+                c = np.asarray(w.spar_chord)
+                root = w.chord_point(np.zeros_like(c), c)
+                tip = w.chord_point(np.ones_like(c), c)
+                gap = np.minimum(np.linalg.norm(np.diff(root, axis=0), axis=1),
+                                 np.linalg.norm(np.diff(tip, axis=0), axis=1))
+                for j in np.flatnonzero(gap < MIN_MEMBER_GAP * size):
+                    pairs.append((f"spars '{spar_name(w.name, j)}' (c={c[j]:g}) and '{spar_name(w.name, j + 1)}' "
+                                  f"(c={c[j + 1]:g}) are {gap[j]:.4g} apart", float(gap[j])))
+        for w in self.station_wings:
+            pairs.extend(w.close_pairs)
+        return pairs
+
     def validate(self, size: float | None = None) -> "Layout":
-        """Check geometric consistency; with an element ``size``, also that no two ribs
-        (planes) or spars (chord points at root and tip) of a wing are closer than
-        ``size``. Returns self; raises :class:`LayoutError` (or :class:`SizeError` for a
-        bad ``size``)."""
+        """Check geometric consistency; with an element ``size``, also that no two neighbouring
+        ribs (planes) or spars (chord points at root and tip) of a wing coincide: closer than
+        :data:`MIN_MEMBER_GAP` element sizes (closer than ``size`` but no closer than that, they
+        are meshed with smaller elements between them). One error names every such pair.
+        Returns self; raises :class:`LayoutError` (or :class:`SizeError` for a bad ``size``)."""
         for w in self.wings:
             _check_wing_geometry(w, self.wing_up(w))
         names = self.member_names()
@@ -344,31 +400,11 @@ class Layout:
                 or not math.isfinite(float(size)) or float(size) <= 0:
             raise SizeError(f"element size must be a positive finite number, got {size!r}")
         size = float(size)
-        for w in self.wings:
-            up = self.wing_up(w)
-            n = w.rib_normal(up)
-            if len(w.rib_eta) >= 2:
-                specs = [m for m in _wing_members(w, up) if m.kind == "rib"]
-                off = np.array([m.plane_point @ n for m in specs])
-                gap = np.diff(off)
-                k = int(np.argmin(gap))
-                if gap[k] < size:
-                    raise LayoutError(
-                        f"ribs '{specs[k].name}' (eta={w.rib_eta[k]:g}) and '{specs[k + 1].name}' "
-                        f"(eta={w.rib_eta[k + 1]:g}) are {gap[k]:.4g} apart, closer than the element size "
-                        f"{size:g}: use fewer ribs or a smaller element size")
-            if len(w.spar_chord) >= 2:
-                c = np.asarray(w.spar_chord)
-                root = w.chord_point(np.zeros_like(c), c)
-                tip = w.chord_point(np.ones_like(c), c)
-                gap = np.minimum(np.linalg.norm(np.diff(root, axis=0), axis=1),
-                                 np.linalg.norm(np.diff(tip, axis=0), axis=1))
-                j = int(np.argmin(gap))
-                if gap[j] < size:
-                    raise LayoutError(
-                        f"spars '{spar_name(w.name, j)}' (c={c[j]:g}) and '{spar_name(w.name, j + 1)}' (c={c[j + 1]:g}) "
-                        f"are {gap[j]:.4g} apart, closer than the element size {size:g}: move them apart "
-                        "or use a smaller element size")
+        pairs = self.coincident_pairs(size)
+        if pairs:
+            txt, fix = coincident_parts(pairs)
+            raise LayoutError(f"members coincide or cross at element size {size:g} (closer than {MIN_MEMBER_GAP:g} "
+                              f"element sizes, {MIN_MEMBER_GAP * size:.4g}): {txt}: {fix}")
         return self
 
     # ------------------------------------------------------------ conversion

@@ -42,8 +42,10 @@ class StationWing:
 
     A resolved wing (:attr:`resolved`) also holds its measured ``planform``
     (:class:`~shellmesh_mdao.layout.planform.Planform`), its members ``specs``
-    (:class:`MemberSpec`, in :meth:`Layout.members` order) and ``notes`` (what the resolution
-    decided that the user did not ask for, e.g. edge webs)."""
+    (:class:`MemberSpec`, in :meth:`Layout.members` order), ``notes`` (what the resolution
+    decided that the user did not ask for, e.g. edge webs) and ``close_pairs`` (the
+    neighbouring ribs or spars that coincide or cross at the resolution's element size:
+    ``(text, gap)``, :meth:`Layout.coincident_pairs`)."""
 
     name: str
     axis: Vec
@@ -64,6 +66,7 @@ class StationWing:
     planform: object = field(default=None, compare=False, repr=False)
     specs: tuple = field(default=(), compare=False, repr=False)
     notes: tuple = field(default=(), compare=False, repr=False)
+    close_pairs: tuple = field(default=(), compare=False, repr=False)
 
     @property
     def resolved(self) -> bool:

@@ -28,9 +28,9 @@ vector (the rib planes' normal, made normal to ``up``). The root and tip ribs li
 root and tip stations (``end_ribs: station``, the default: the side of body or the symmetry
 plane, and the tip) or take the ribs' orientation and touch the station at their inboard
 (outboard) end (``end_ribs: same``). Every two neighbouring ribs must stay at least half their
-stations' spacing (and one element size) apart at both ends, the root and tip ribs included: a
-rib that would come closer, or cross its neighbour, is turned towards the station direction
-step by step (a fan at the root and tip of a swept wing) until they do. A rib runs from its
+stations' spacing and one element size (ribs whose stations are closer than that: their
+stations' spacing) apart at both ends, the root and tip ribs included: a rib that would come
+closer, or cross its neighbour, is turned towards the station direction step by step (a fan at the root and tip of a swept wing) until they do. A rib runs from its
 first to its last spar (T-junctions) and crosses the spars between (X-junctions).
 
 **Fewer than two spars.** The ribs run from the leading to the trailing edge as closed
@@ -46,8 +46,11 @@ the report say so.
 
 **Checks before meshing** (:class:`~shellmesh_mdao.errors.LayoutError` naming the member and
 the fix): a spar or web less than :data:`MIN_WEB_HEIGHT` element sizes tall somewhere (a web of
-quads that thin cannot be meshed), two ribs closer than an element size, a member of one wing
-inside another wing's box (two halves whose root ribs overlap at the symmetry plane).
+quads that thin cannot be meshed), neighbouring ribs (spars) that cross or coincide (closer than
+:data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` element sizes; one error names every such
+pair of every wing; closer than an element size but no closer than that, they are meshed with
+smaller elements between them), a member of one wing inside another wing's box (two halves whose
+root ribs overlap at the symmetry plane).
 """
 from __future__ import annotations
 
@@ -58,7 +61,7 @@ import numpy as np
 from ..errors import LayoutError
 from ..families import part_name, rib_name, spar_name, web_name
 from .planform import Planform, measure_planform
-from .schema import Layout, MemberSpec
+from .schema import MIN_MEMBER_GAP, Layout, MemberSpec, coincident_parts
 from .stations import StationWing
 
 __all__ = ["resolve_layout", "resolve_station_wing", "PlanformLine", "MIN_WEB_HEIGHT", "MIN_EDGE_ANGLE",
@@ -254,7 +257,9 @@ def _layout_ribs(box: _Box, bounds, c_mid, ref, T0=None):
     if n < 2:
         return tk, xk, T
     gap = np.diff(box.pf.station(eta))
-    margin = np.maximum(0.5 * gap, box.size)
+    # half their stations' spacing and an element size apart; ribs whose stations are closer than
+    # that (meshed with smaller elements between them) at least their stations' spacing
+    margin = np.maximum(0.5 * gap, np.minimum(gap, box.size))
     for _ in range(400):                                  # turn ribs that come too close
         ends = np.stack([_rib_ends(box, bounds, tk[k], xk[k], T[k]) for k in range(n)])
         ok = np.isfinite(ends).all(1)
@@ -383,20 +388,7 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
             ref = next(ln for nm, j, xs, ln in lines if nm == spar_name(w.name, rs))
     tk, xk, T = _layout_ribs(box, bounds, c_mid, ref, T0)
     # ---------------------------------------------------------------- checks
-    n = len(tk)
-    if n >= 2:
-        ends = np.stack([_rib_ends(box, bounds, tk[k], xk[k], T[k]) for k in range(n)])
-        pts_f = np.stack([ends[:, 0], bounds[0](ends[:, 0])], 1)
-        pts_r = np.stack([ends[:, 1], bounds[-1](ends[:, 1])], 1)
-        dist = np.minimum(np.linalg.norm(np.diff(pts_f, axis=0), axis=1), np.linalg.norm(np.diff(pts_r, axis=0),
-                                                                                          axis=1))
-        dt = np.minimum(np.diff(ends[:, 0]), np.diff(ends[:, 1]))
-        k = int(np.argmin(np.where(dt > 0, dist, -1.0)))
-        if dt[k] <= 0 or dist[k] < h:
-            what = "cross each other" if dt[k] <= 0 else f"are {dist[k]:.4g} apart at a spar, closer than the " \
-                                                           f"element size {h:g}"
-            raise LayoutError(f"ribs '{w.name}/rib_{k}' and '{w.name}/rib_{k + 1}' {what}: use fewer ribs or a smaller "
-                              "element size")
+    close = _close_pairs(w, box, bounds, lines, tk, xk, T, h)
     for nm, j, xs, ln in lines:
         th, tmin, cmin = _spar_height(box, ln, box.t0, box.t1)
         if th < MIN_WEB_HEIGHT * h:
@@ -410,7 +402,35 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
                 f"{th / MIN_WEB_HEIGHT:.4g}")
     # ---------------------------------------------------------------- members
     specs = _members(w, box, lines, loop_ribs, bounds, tk, xk, T)
-    return replace(w, planform=pf, specs=tuple(specs), notes=tuple(notes))
+    return replace(w, planform=pf, specs=tuple(specs), notes=tuple(notes), close_pairs=tuple(close))
+
+
+def _close_pairs(w: StationWing, box: _Box, bounds, lines, tk, xk, T, h: float) -> list:
+    """Neighbouring ribs that cross or come closer than :data:`MIN_MEMBER_GAP` element sizes at a
+    spar (or edge), and neighbouring spar-like lines that cross or come that close:
+    ``[(text, gap)]`` (``gap`` None where they cross)."""
+    out = []
+    n = len(tk)
+    if n >= 2:
+        ends = np.stack([_rib_ends(box, bounds, tk[k], xk[k], T[k]) for k in range(n)])
+        pts_f = np.stack([ends[:, 0], bounds[0](ends[:, 0])], 1)
+        pts_r = np.stack([ends[:, 1], bounds[-1](ends[:, 1])], 1)
+        dist = np.minimum(np.linalg.norm(np.diff(pts_f, axis=0), axis=1),
+                          np.linalg.norm(np.diff(pts_r, axis=0), axis=1))
+        dt = np.minimum(np.diff(ends[:, 0]), np.diff(ends[:, 1]))
+        for k in np.flatnonzero((dt <= 0) | (dist < MIN_MEMBER_GAP * h)):
+            a, b = rib_name(w.name, k), rib_name(w.name, k + 1)
+            out.append((f"ribs '{a}' and '{b}' cross each other", None) if dt[k] <= 0 else
+                       (f"ribs '{a}' and '{b}' are {dist[k]:.4g} apart at a spar", float(dist[k])))
+    ts = box.ts
+    for (na, _, _, la), (nb, _, _, lb) in zip(lines[:-1], lines[1:]):
+        gap = lb(ts) - la(ts)
+        k = int(np.argmin(gap))
+        if gap[k] <= 0:
+            out.append((f"spars '{na}' and '{nb}' cross each other near station {ts[k]:.6g}", None))
+        elif gap[k] < MIN_MEMBER_GAP * h:
+            out.append((f"spars '{na}' and '{nb}' are {gap[k]:.4g} apart near station {ts[k]:.6g}", float(gap[k])))
+    return out
 
 
 def _seeds(box: _Box, ta, xa, tb, xb, n=17) -> np.ndarray:
@@ -551,5 +571,16 @@ def resolve_layout(layout, points, tris, size: float | None = None) -> Layout:
     P = np.asarray(points, float)
     T = np.asarray(tris, np.int64)
     wings = tuple(w if w.resolved else resolve_station_wing(w, P, T, size, layout.up) for w in layout.station_wings)
+    out = replace(layout, station_wings=wings)
+    # every pair that coincides or crosses, over all wings, in one error
+    pairs = [p for w in wings for p in w.close_pairs]
+    if pairs:
+        pairs = out.coincident_pairs(size) if size is not None else pairs
+        h = float(size) if size is not None else None
+        txt, fix = coincident_parts(pairs)
+        at = f"{h:g}" if h is not None else "a fiftieth of each wing's span"
+        lim = f"{MIN_MEMBER_GAP * h:.4g}" if h is not None else "a fifth of that"
+        raise LayoutError(f"members coincide or cross at element size {at} (closer than {MIN_MEMBER_GAP:g} element "
+                          f"sizes, {lim}): {txt}: {fix}")
     _check_overlaps(wings)
-    return replace(layout, station_wings=wings)
+    return out

@@ -19,11 +19,14 @@ from .spacing import relax_chain_spacing, split_thin_chain_edges
 __all__ = ["build_members", "member_statistics"]
 
 
-def _line_params(L: float, size: float, h0: float | None = None, h1: float | None = None) -> np.ndarray:
+def _line_params(L: float, size: float, h0: float | None = None, h1: float | None = None,
+                 local=None) -> np.ndarray:
     """Interior parameters in (0, 1) dividing a line of length ``L`` into pieces of about
     ``size``, graded (spacing growing by at most 0.3 per unit length) from the end spacings
     ``h0``/``h1`` when these are smaller, so the first piece at a crossing matches the chain
-    edges meeting there. A line shorter than about ``1.5`` pieces stays one piece."""
+    edges meeting there, and no longer than ``local(t)`` (the local sizes asked for at
+    parameters ``t`` in [0, 1]; None: none). A line shorter than about ``1.5`` pieces stays one
+    piece."""
     if L <= 0:
         return np.zeros(0)
     h0 = size if h0 is None else min(max(h0, 1e-12 * L), size)
@@ -33,6 +36,8 @@ def _line_params(L: float, size: float, h0: float | None = None, h1: float | Non
     g = 0.3
     x = np.linspace(0.0, L, 2049)
     h = np.minimum(size, np.minimum(h0 + g * x, h1 + g * (L - x)))
+    if local is not None:
+        h = np.minimum(h, np.maximum(local(x / L), 1e-12 * L))
     w = np.concatenate([[0.0], np.cumsum(0.5 * (1 / h[1:] + 1 / h[:-1]) * np.diff(x))])
     n = max(1, int(np.round(w[-1])))
     if n == 1:
@@ -135,7 +140,8 @@ def _check_member_pairs(mems, polys, P, joined: set, eps: float, coplanar: bool 
 
 # ============================================================================ main entry
 def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_angle: float = DEFAULT_MIN_ANGLE,
-                  relax_chains: bool = True, split_thin: bool = True, tol: float = 1e-9) -> ShellMesh:
+                  relax_chains: bool = True, split_thin: bool = True, tol: float = 1e-9,
+                  size_field=None) -> ShellMesh:
     """The skin plus every member's triangle mesh, in one conforming :class:`ShellMesh`.
 
     ``skin`` is the imprinted triangle skin and ``chains`` its
@@ -143,7 +149,9 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
     member's pieces 'upper_<s>'/'lower_<s>', or one closed chain for a full-chord member);
     ``members_info`` one :class:`MemberInfo` (or :class:`~shellmesh_mdao.layout.MemberSpec`)
     per member; ``size`` the target element size of the member meshes (the skin's working
-    edge length).
+    edge length); ``size_field`` (a :class:`~shellmesh_mdao.core.sizefield.SizeField` in the units
+    of ``size``; None: none) the smaller local sizes asked for (members closer than the element
+    size): the junction and end lines are divided, and the members meshed, no coarser.
 
     The member meshes use the chain vertices by index (no coordinate merging). Two local
     repairs of the chains run first (both keep every skin vertex on the input surface and
@@ -227,7 +235,8 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
 
     def add_line(a, b, h0=None, h1=None):
         nonlocal n_next
-        t = _line_params(float(np.linalg.norm(P[b] - P[a])), size, h0, h1)
+        local = None if size_field is None else (lambda t: size_field.at(P[a][None] + t[:, None] * (P[b] - P[a]), size))
+        t = _line_params(float(np.linalg.norm(P[b] - P[a])), size, h0, h1, local)
         inner = P[a][None] + t[:, None] * (P[b] - P[a])[None]
         ids = n_next + np.arange(len(inner))
         n_next += len(inner)
@@ -269,11 +278,11 @@ def build_members(skin: ShellMesh, chains, members_info, size: float, *, min_ang
         inner_lines = [junctions[jx].nodes for jx in m.interior]
         if m.info.is_planar:
             newp, gtris = mesh_planar_region(m, P, m.loop if m.loop is not None else polys[k], inner_lines, size,
-                                             min_angle, n_total)
+                                             min_angle, n_total, size_field)
         elif m.joints:
-            newp, gtris = mesh_panels(m, P, junctions, size, min_angle, n_total, tol)
+            newp, gtris = mesh_panels(m, P, junctions, size, min_angle, n_total, tol, size_field)
         else:
-            newp, gtris = mesh_coons(m, P, junctions, size, min_angle, n_total)
+            newp, gtris = mesh_coons(m, P, junctions, size, min_angle, n_total, size_field)
         pts_parts.append(newp)
         n_total += len(newp)
         names_k = _piece_names(m, gtris, inner_lines, np.vstack(pts_parts), n_total,

@@ -192,7 +192,7 @@ def _strip_width(x: np.ndarray, seg: np.ndarray, tris: np.ndarray, step: float =
 
 def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_angle: float = DEFAULT_MIN_ANGLE,
                        name: str = "member", gradation: float = 0.3, rounds: int = 3,
-                       smooth: int = 6, narrow: float = NARROW_STRIP) -> tuple[np.ndarray, np.ndarray]:
+                       smooth: int = 6, narrow: float = NARROW_STRIP, local=None) -> tuple[np.ndarray, np.ndarray]:
     """Constrained Delaunay triangulation of a planar straight-line graph in 2D.
 
     ``uv`` (n, 2) nodes, ``segments`` (s, 2) node pairs that must be triangle edges (the
@@ -212,7 +212,9 @@ def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_an
     nodes, when its smallest angle is at least :data:`STRIP_MIN_ANGLE` (15 degrees) or the refined
     mesh's: a row of triangles each with an edge on one chain, which the merge pairs into quads
     with one edge on each chain (refinement would put nodes at mid-height, whose diamonds
-    subdivide into skewed quads). ``narrow=0`` always refines.
+    subdivide into skewed quads). ``narrow=0`` always refines. ``local``: a function of points
+    (k, 2) in the coordinates of ``uv`` giving the local sizes asked for there (no larger than
+    ``size`` is used; None: none).
     """
     import triangle as tr
 
@@ -230,7 +232,10 @@ def triangulate_planar(uv: np.ndarray, segments: np.ndarray, size: float, min_an
     opts = f"rpYYq{float(min_angle):.6f}aQ"
     for _ in range(rounds):
         tris = np.asarray(t["triangles"], np.int64)
-        h = sizing(reduce_short(np.asarray(t["vertices"])[tris], "mean"))
+        cen = reduce_short(np.asarray(t["vertices"])[tris], "mean")
+        h = sizing(cen)
+        if local is not None:
+            h = np.minimum(h, np.maximum(np.asarray(local(cen * size + o), float) / size, 1e-3))
         n_before = len(t["vertices"])
         t = tr.triangulate({"vertices": t["vertices"], "segments": t["segments"], "triangles": tris,
                             "triangle_max_area": _EQ_AREA * h * h}, opts)
@@ -327,10 +332,12 @@ def coons_patch(lower: np.ndarray, upper: np.ndarray, side0: np.ndarray, side1: 
 
 
 # ============================================================================ meshing a member
-def mesh_planar_region(m: MemberChains, P, outline, inner_lines, size, min_angle, n_total):
+def mesh_planar_region(m: MemberChains, P, outline, inner_lines, size, min_angle, n_total, size_field=None):
     """Triangulate the planar region of ``m`` (its plane in ``m.info``) bounded by the closed node
-    loop ``outline`` with the interior node lines ``inner_lines``; returns the new interior
-    points (numbered from ``n_total``, exactly on the plane) and the triangles (global ids)."""
+    loop ``outline`` with the interior node lines ``inner_lines``, no coarser than ``size_field``
+    (a :class:`~shellmesh_mdao.core.sizefield.SizeField` in the units of ``size``; None: none)
+    asks; returns the new interior points (numbered from ``n_total``, exactly on the plane) and
+    the triangles (global ids)."""
     lines = [np.append(outline, outline[0])] + list(inner_lines)
     nodes = np.unique(np.concatenate(lines))
     remap = np.full(int(nodes.max()) + 1, -1, np.int64)
@@ -338,20 +345,23 @@ def mesh_planar_region(m: MemberChains, P, outline, inner_lines, size, min_angle
     seg = np.vstack([np.stack([remap[ln[:-1]], remap[ln[1:]]], 1) for ln in lines])
     e1, e2, origin = plane_frame(m, P, nodes)
     uv = to2d(P[nodes], e1, e2, origin)
-    uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'")
+    local = None if size_field is None else \
+        (lambda q: size_field.at(origin + q[:, :1] * e1 + q[:, 1:] * e2, size))
+    uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'", local=local)
     st = uv_all[len(nodes):]
     newp = origin + st[:, :1] * e1 + st[:, 1:] * e2
     gid = np.concatenate([nodes, n_total + np.arange(len(st))])
     return newp, gid[tris]
 
 
-def mesh_panels(m: MemberChains, P, junctions, size, min_angle, n_total, tol):
+def mesh_panels(m: MemberChains, P, junctions, size, min_angle, n_total, tol, size_field=None):
     """Mesh a kinked explicit member panel by panel: panel ``p`` lies between kink line ``p - 1``
     and kink line ``p`` (the member's own ends at the first and last panel) and is bounded by
     the pieces of the upper and lower chain between them. A panel whose nodes are coplanar
     (within ``tol`` of the diagonal) is meshed in its plane (new nodes exactly on it), any
-    other through the Coons patch of its four sides. Interior junction lines must lie inside
-    a planar panel. Returns the new interior points (from ``n_total``) and the triangles."""
+    other through the Coons patch of its four sides (both no coarser than ``size_field`` asks).
+    Interior junction lines must lie inside a planar panel. Returns the new interior points (from
+    ``n_total``) and the triangles."""
     U, L = m.upper, m.lower
     ku = [int(np.flatnonzero(U == a)[0]) for a, _ in m.joints]
     kl = [int(np.flatnonzero(L == b)[0]) for _, b in m.joints]
@@ -387,7 +397,7 @@ def mesh_panels(m: MemberChains, P, junctions, size, min_angle, n_total, tol):
         pp, pn = fit_plane(P[outline], tol * diag / max(ext, 1e-300))
         panel = MemberChains(replace(m.info, plane_point=pp, plane_normal=pn), upper=Up, lower=Lp)
         if pn is not None:
-            newp, t = mesh_planar_region(panel, P, outline, lines_in, size, min_angle, n_total)
+            newp, t = mesh_planar_region(panel, P, outline, lines_in, size, min_angle, n_total, size_field)
         else:
             if lines_in:
                 raise LayoutError(f"a member meets the non-planar panel {p} of member '{m.name}' inside it; junction "
@@ -395,7 +405,7 @@ def mesh_panels(m: MemberChains, P, junctions, size, min_angle, n_total, tol):
                                   "point at the junction, or make the panel planar")
             panel.closing, panel.end_lines = [None, None], [sd[0] if len(sd[0]) else None,
                                                             sd[1] if len(sd[1]) else None]
-            newp, t = mesh_coons(panel, P, junctions, size, min_angle, n_total)
+            newp, t = mesh_coons(panel, P, junctions, size, min_angle, n_total, size_field)
         # one orientation for all panels: the upper chain is traversed forward (Up[0] -> Up[1])
         fwd = (t == Up[0]) & (np.roll(t, -1, axis=1) == Up[1])
         if not fwd.any():
@@ -406,9 +416,10 @@ def mesh_panels(m: MemberChains, P, junctions, size, min_angle, n_total, tol):
     return np.vstack(pts), np.vstack(tris)
 
 
-def mesh_coons(m: MemberChains, P, junctions, size, min_angle, n_total):
-    """Mesh a non-planar open member through the Coons patch of its four sides; returns the
-    new interior points (numbered from ``n_total``) and the triangles (global indices)."""
+def mesh_coons(m: MemberChains, P, junctions, size, min_angle, n_total, size_field=None):
+    """Mesh a non-planar open member through the Coons patch of its four sides, no coarser than
+    ``size_field`` asks; returns the new interior points (numbered from ``n_total``) and the
+    triangles (global indices)."""
     if m.loop is not None:
         raise LayoutError(f"member '{m.name}' is non-planar and closed; a closed (full-chord) member must be planar")
     U, L = m.upper, m.lower
@@ -434,7 +445,8 @@ def mesh_coons(m: MemberChains, P, junctions, size, min_angle, n_total):
                     np.stack([np.zeros(len(s0) - 2), s0[1:-1][::-1] * len_t], 1)])
     nb = len(nodes)
     seg = np.stack([np.arange(nb), (np.arange(nb) + 1) % nb], 1)
-    uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'")
+    local = None if size_field is None else (lambda q: size_field.at(S(q[:, 0] / len_s, q[:, 1] / len_t), size))
+    uv_all, tris = triangulate_planar(uv, seg, size, min_angle, f"member '{m.name}'", local=local)
     st = uv_all[nb:]
     newp = S(st[:, 0] / len_s, st[:, 1] / len_t) if len(st) else np.zeros((0, 3))
     gid = np.concatenate([nodes, n_total + np.arange(len(st))])

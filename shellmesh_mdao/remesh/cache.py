@@ -1,7 +1,9 @@
 """Remeshed skins kept across pipeline runs.
 
-The remeshed skin depends on the input surface, the size and the solver options only, never on the
-layout, so a study that varies the layout (a DOE over rib stations, an optimisation) needs it once.
+The remeshed skin depends on the input surface, the size and the solver options only, and on the
+layout only where members come closer than the element size (the local sizes between them, part of
+the key), so a study that varies the layout (a DOE over rib stations, an optimisation) needs it once
+while its members stay an element size apart.
 :class:`RemeshCache` keeps the last few: the pipeline's remesh stage looks a skin up before
 remeshing and stores what it made. :func:`~shellmesh_mdao.pipeline.run_pipeline` uses the process's
 :data:`DEFAULT_REMESH_CACHE` unless told otherwise; each
@@ -63,10 +65,12 @@ class RemeshCache:
         self.seconds = 0.0
 
     @staticmethod
-    def key(surface, size: float, options) -> tuple:
+    def key(surface, size: float, options, size_field=None) -> tuple:
         """The key of the skin remeshed from ``surface`` at quad size ``size`` with the solver
-        ``options`` (a frozen, hashable options object)."""
-        return surface_digest(surface), float(size), options
+        ``options`` (a frozen, hashable options object) and the local sizes ``size_field`` (a
+        :class:`~shellmesh_mdao.core.sizefield.SizeField`; None or empty: none)."""
+        f = None if size_field is None or size_field.empty else size_field.digest()
+        return surface_digest(surface), float(size), options, f
 
     def get(self, key) -> CachedSkin | None:
         """The skin stored under ``key`` (counted as a hit), or None (a miss is counted by :meth:`put`)."""

@@ -199,7 +199,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = Re
                 min_edge: float | None = None, gradation: float = 0.5, corner_angle: float = 50.0,
                 wedge_angle: float = 20.0, keep_component_borders: bool = True, deviation_passes: int = 2,
                 deviation_splits: bool = True, finish_rounds: int = 4, max_flip_dihedral: float = 120.0,
-                report: dict | None = None, log=None) -> ShellMesh:
+                size_field=None, report: dict | None = None, log=None) -> ShellMesh:
     """Isotropic, curvature-adapted remesh of a triangulated skin to ``target_edge``.
 
     The input's resolution does not set the output's: the result has edges around
@@ -266,6 +266,12 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = Re
         Largest dihedral (degrees) across which an edge may be flipped during remeshing
         (every flip must also keep the new edge within ``max_deviation`` and not turn a
         triangle against the input normal).
+    size_field : SizeField, optional
+        Local edge lengths asked for below ``target_edge`` (a
+        :class:`~shellmesh_mdao.core.sizefield.SizeField` in the units of ``target_edge``: two
+        members closer than the element size): the sizing is the smaller of the curvature
+        sizing and the field, evaluated where each vertex is (not smeared over the input
+        triangles), never below ``min_edge``.
     report : dict, optional
         Filled with figures: counts, edge-length percentiles relative to the target,
         angles, deviation, timings.
@@ -320,7 +326,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = Re
     t0 = time.perf_counter()
     surf = InputSurface(mesh, target, delta, feature_angle, corner_angle, wedge_angle, keep_component_borders,
                     locator)
-    surf.set_sizing(h_min, gradation)
+    surf.set_sizing(h_min, gradation, None if size_field is None or size_field.empty else size_field)
     timings["prepare"] = time.perf_counter() - t0
     ctx = Context(surf, max_flip_dihedral=max_flip_dihedral, delta=delta)
     W = _work_from_surface(surf)

@@ -105,6 +105,7 @@ class InputSurface:
         self._ctree = None
         self.h = np.full(nv, self.target)
         self.h_min = self.target
+        self.field = None
 
     # ------------------------------------------------------------------ patches
     def _patches(self, isfeat):
@@ -396,8 +397,10 @@ class InputSurface:
         return np.where(pick_last, s_last, s_first)
 
     # ------------------------------------------------------------------ sizing field
-    def set_sizing(self, h_min, gradation):
-        """Curvature- and feature-adapted edge length at every input vertex (``self.h``)."""
+    def set_sizing(self, h_min, gradation, field=None):
+        """Curvature- and feature-adapted edge length at every input vertex (``self.h``); with a
+        ``field`` (:class:`~shellmesh_mdao.core.sizefield.SizeField`) no longer than it there, and
+        :meth:`field_at` gives it wherever a vertex of the remesh is."""
         P = self.P
         nv = len(P)
         target = self.target
@@ -461,10 +464,21 @@ class InputSurface:
         #     well-shaped triangles around the end
         if len(self.cut_corners):
             h[self.cut_corners] = np.minimum(h[self.cut_corners], 2.0 * self.w_cut)
+        # (7) the local sizes asked for (members closer than the element size)
+        self.field = field
+        if field is not None:
+            h = np.minimum(h, field.at(P, target))
         h = np.clip(h, h_min, target)
-        # (7) gradation: h_i <= h_j + gradation * |x_i - x_j|  (multi-source Dijkstra)
+        # (8) gradation: h_i <= h_j + gradation * |x_i - x_j|  (multi-source Dijkstra)
         self.h = _grade(P, E, h, gradation)
         self.h_min = h_min
+
+    def field_at(self, x):
+        """The size field at points ``x`` (m, 3), between ``h_min`` and the target (the target
+        without a field)."""
+        if self.field is None:
+            return np.full(len(x), self.target)
+        return np.maximum(self.field.at(x, self.target), self.h_min)
 
     def shrink_sizing(self, verts, hnew, gradation):
         h = self.h.copy()
