@@ -25,7 +25,7 @@ both from a seed.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -36,7 +36,7 @@ from .lofts import (airfoil, body_of_revolution, flat_cap, loft, match_cap, orie
 
 __all__ = ["AircraftParams", "StructureParams", "RANGES", "CHOICES", "ORIENTATIONS", "draw_aircraft",
            "draw_structure", "aircraft_parts", "aircraft_surface", "aircraft_layout", "random_aircraft",
-           "wing_planform"]
+           "wing_planform", "wing_section"]
 
 #: range of every number of :class:`AircraftParams` that is drawn (uniformly)
 RANGES = {
@@ -93,14 +93,16 @@ class AircraftParams:
     Fuselage (``fuselage``; without it a flying wing, no tails):
 
     * ``fuselage_radius`` semi-spans (raised if needed so the wing's centre section lies within
-      80 % of the body's half height), ``fuselage_height_ratio`` height / width (1: a body of
+      80 % of the body's half height; the span follows the aspect ratio, the body radius and the
+      crank station from one another), ``fuselage_height_ratio`` height / width (1: a body of
       revolution); ``nose_length`` radii (an elliptic nose), ``wing_x`` root chords of cylinder
       ahead of the wing, ``wing_z`` the wing's height in the body (-1 low ... 1 high: the share of
       the room the centre section leaves), ``tail_length`` radii of tail cone, ``tail_radius``
       the cone's end radius in radii (raised if a tail's root section needs more room; an elliptic
       end cap closes it).
 
-    Tails (on the tail cone, trailing edges at the cone's end):
+    Tails (trailing edges at 95 % of the tail cone; the cylinder runs on behind the wing until the
+    horizontal tail's leading edge is a tenth of the root chord behind the wing's trailing edge):
 
     * ``htail``: ``htail_span`` exposed semi-span in wing semi-spans, ``htail_chord`` root chord
       in wing root chords, ``htail_taper``, ``htail_sweep_deg``, ``htail_dihedral_deg``,
@@ -300,24 +302,23 @@ def _shape(p: AircraftParams) -> _Shape:
     ct = lam * cr
     ck = (lam + p.crank_chord * (1 - lam)) * cr if p.cranked else None
     # semi-span from the aspect ratio: b = AR * mean chord / 2 (the mean chord depends on eta only)
-    R0 = 0.0
-    y_body = 0.0
-    # the crank and the body interact (the crank is a share of the exposed span): iterate twice
+    H_need = (0.5 * p.thickness + p.camber) * cr / 0.8     # the wing's centre section within 80 % of the body
+
+    def body(b):
+        return max(p.fuselage_radius * b, H_need / p.fuselage_height_ratio) if p.fuselage else 0.0
+
+    # the body and the crank station depend on the span, the span on the mean chord (aspect
+    # ratio), the mean chord on the crank station: a fixed point (a contraction: converges fast)
     b = p.aspect_ratio * cr * (1 + lam) / 4
-    for _ in range(3):
-        if p.fuselage:
-            R0 = p.fuselage_radius * b
-        half_section = (0.5 * p.thickness + p.camber) * cr
-        H_need = half_section / 0.8
-        R = max(R0, H_need / p.fuselage_height_ratio) if p.fuselage else 0.0
-        y_body = R
-        if p.cranked:
-            eta = (y_body + p.crank_eta * (b - y_body)) / b
-            m = 0.5 * (eta * (cr + ck) + (1 - eta) * (ck + ct))
-        else:
-            eta, m = None, 0.5 * (cr + ct)
-        b = p.aspect_ratio * m / 2
-    y_crank = eta * b if p.cranked else None
+    for _ in range(30):
+        if not p.cranked:
+            break
+        R = body(b)
+        eta = (R + p.crank_eta * (b - R)) / b
+        b = p.aspect_ratio * 0.5 * (eta * (cr + ck) + (1 - eta) * (ck + ct)) / 2
+    R = body(b)
+    y_body = R
+    y_crank = R + p.crank_eta * (b - R) if p.cranked else None
     tl_in, tl_out = np.tan(np.radians(p.sweep_deg)), np.tan(np.radians(p.outer_sweep_deg))
     if p.cranked:
         s_knots = np.array([0.0, y_crank, b])
@@ -344,6 +345,11 @@ def _shape(p: AircraftParams) -> _Shape:
         # leave room for their root chords
         need = max(c_ht if p.htail else 0.0, c_f if p.fin else 0.0) + 0.1 * cr
         aft = max(0.3 * cr, need - 0.95 * Lt)
+        if p.htail:     # and the tail's leading edge a tenth of the root chord behind the wing's trailing edge
+            yy = np.linspace(0.0, R + p.htail_span * b, 65)
+            te_wing = x_w + np.interp(yy, s_knots, le_off) + np.interp(yy, s_knots, chords)
+            le_tail = x_w + cr + aft + 0.95 * Lt - c_ht + yy * np.tan(np.radians(p.htail_sweep_deg))
+            aft += max(0.0, float((te_wing + 0.1 * cr - le_tail).max()))
         x_cyl = x_w + cr + aft
         r_end = p.tail_radius * R
         for on, c, t in ((p.htail, c_ht, p.htail_thickness), (p.fin, c_f, p.fin_thickness)):
@@ -392,6 +398,22 @@ def wing_planform(params: AircraftParams) -> dict:
     sh = _shape(params)
     return {"semi_span": sh.b, "mean_chord": sh.mean_chord, "root_chord": float(sh.wing.chords[0]),
             "tip_chord": float(sh.wing.chords[-1]), "body_half_width": sh.y_body, "crank": sh.y_crank}
+
+
+def wing_section(params: AircraftParams, y: float) -> dict:
+    """The wing's section at station ``y`` (either side, inside the wing's span): ``chord`` (m),
+    ``thickness`` (the NACA thickness, share of the chord), ``depth`` (m: the largest distance
+    between the upper and lower surface across the chord, a blunt trailing edge's opening
+    included), ``twist_deg``, ``leading_edge`` (the point, before the twist turns the section
+    about its quarter chord)."""
+    sh = _shape(params)
+    w = sh.wing
+    le, c, tw, t = w.at(abs(float(y)))
+    le = le.copy()
+    le[1] = float(y)
+    af = airfoil(max(params.n_chord, 256), t, w.camber, w.camber_pos, w.te)
+    return {"chord": float(c), "thickness": float(t), "depth": float((af.upper - af.lower).max() * c),
+            "twist_deg": float(tw), "leading_edge": le}
 
 
 # ------------------------------------------------------------------ parts
@@ -453,7 +475,7 @@ def _mirror_rings(rings):
     return m
 
 
-def _winglet_rings(sh: _Shape, p: AircraftParams, n: int):
+def _winglet_rings(sh: _Shape, p: AircraftParams, n: int, tip_ring: np.ndarray):
     """Sections of a blended winglet past the wing tip (right side): a bend from the dihedral to
     the cant angle, then a straight part; the chord tapers, the thickness and camber change
     linearly over its length."""
@@ -461,8 +483,10 @@ def _winglet_rings(sh: _Shape, p: AircraftParams, n: int):
     le0, c0, tw0, t0 = w.at(w.span)
     gam, cant = np.radians(p.dihedral_deg), np.radians(p.winglet_cant_deg)
     h = p.winglet_height * sh.b
-    af_top = airfoil(n, t0, w.camber, w.camber_pos, w.te)
-    rho = max(p.winglet_radius * h, 1.5 * float(af_top.upper.max()) * c0, 1.5 * float(-af_top.lower.min()) * c0)
+    # the bend's centre lies on the upper side: every point of the (twisted) tip section, the
+    # trailing edge of a twisted one too, stays on this side of it
+    n0 = np.array([0.0, -np.sin(gam), np.cos(gam)])
+    rho = max(p.winglet_radius * h, 1.5 * float(((tip_ring - le0) @ n0).max()))
     na, ns = 8, 8
     alpha = np.linspace(gam, cant, na + 1)[1:]
     q = le0 + rho * np.array([0.0, -np.sin(gam), np.cos(gam)])
@@ -526,7 +550,7 @@ def aircraft_parts(params: AircraftParams) -> dict:
     right, af = _rings(w, s, p, n)
     tip_out = np.array([0.0, 1.0, 0.0])
     if p.winglet == "blended":
-        extra, af, tip_out = _winglet_rings(sh, p, n)
+        extra, af, tip_out = _winglet_rings(sh, p, n, right[-1])
         right = np.concatenate([right, extra])
     rings = np.concatenate([_mirror_rings(right)[:-1], right])
     left_out = tip_out * np.array([1.0, -1.0, 1.0])
