@@ -124,8 +124,8 @@ def run_case_in_child(seed: int, timeout: float = 1800.0) -> dict:
 
 def summary_counts(results: list) -> dict:
     """``{row: {outcome: count}}``: a ``"total"`` row, one per divisor band of :data:`BANDS`
-    (``"chord/5-10"`` ...), and one per feature of the draws (winglet kinds, tips, trailing edges,
-    cranked, flying wing)."""
+    (``"chord/5-10"`` ...), one per feature of the draws (winglet kinds, tips, trailing edges,
+    cranked, flying wing) and of their layouts (spar count, rib orientation, tails with members)."""
     rows: dict = {}
 
     def add(row, r):
@@ -144,7 +144,17 @@ def summary_counts(results: list) -> dict:
             add("blunt TE" if p["blunt_te"] else "sharp TE", r)
             add("cranked" if p["cranked"] else "straight", r)
             add("fuselage" if p["fuselage"] else "flying wing", r)
-    return rows
+        st = r.get("structure")
+        if st:
+            add(f"{len(st['spars'])} spar{'s' if len(st['spars']) > 1 else ''}", r)
+            add(f"ribs {st['orientation']}", r)
+            add("tails with members" if st["tails"] else "wing members only", r)
+    order = (["total"] + [f"chord/{lo:g}-{hi:g}" for lo, hi in BANDS]
+             + [f"winglet {k}" for k in ("none", "blended", "separate")] + ["tip flat", "tip round", "sharp TE",
+                "blunt TE", "straight", "cranked", "fuselage", "flying wing", "1 spar", "2 spars", "3 spars"]
+             + [f"ribs {o}" for o in ("normal_to_spar", "streamwise", "normal_to_midchord")]
+             + ["wing members only", "tails with members"])
+    return {k: rows[k] for k in order if k in rows}
 
 
 def write_page(results: list, meta: dict, path) -> None:
