@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import SizeError
-from .families import SKIN
-from .mesh import ShellMesh
+from ..errors import SizeError
+from ..families import SKIN
+from ..mesh import ShellMesh
 
 __all__ = ["naca4", "naca_wing", "naca_wing_layout", "DEFAULT_WING"]
 
