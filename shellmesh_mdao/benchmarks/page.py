@@ -15,9 +15,19 @@ from .corpus import (GMSH_FEATURE_ANGLE, MEMORY_BUDGET_GB, PERTURB_SCALE, PIPELI
                      pair_medians, pair_row)
 from .figures import TARGETS, target_checks
 
-__all__ = ["KEEP_MARKER", "kept_part", "render_page", "robustness_section", "write_outputs"]
+__all__ = ["KEEP_MARKER", "kept_part", "render_page", "robustness_section", "write_outputs", "outcome_rows"]
 
 KEEP_MARKER = "<!-- everything below this line is kept by run_scripts/benchmark.py -->"
+
+
+def outcome_rows(first: str, counts: dict) -> list[str]:
+    """A markdown table of outcome counts (``{row: {"ok", "guarantee", "refused", "crash": n}}``,
+    the row ``"total"`` in bold) whose first column is headed ``first``."""
+    lines = [f"| {first} | cases | ok | guarantee | refused | crash |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for row, c in counts.items():
+        name = f"**{row}**" if row == "total" else row
+        lines.append(f"| {name} | {sum(c.values())} | {c['ok']} | {c['guarantee']} | {c['refused']} | {c['crash']} |")
+    return lines
 
 
 def _f(v, fmt="{:.3f}", none="—"):

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .child import failing_stage, run_in_child
+from .page import outcome_rows
 
 __all__ = ["DIVISOR_RANGE", "BANDS", "draw_case", "run_case", "run_case_in_child", "summary_counts",
            "describe_params", "write_page"]
@@ -173,12 +174,8 @@ def write_page(results: list, meta: dict, path) -> None:
              f"mean chord / d, d log-uniform in {lo:g}-{hi:g} (the harness: "
              "`shellmesh_mdao.benchmarks.random_family`). *ok*: meshed and every guarantee of "
              "`check_guarantees` holds; *guarantee*: meshed, a guarantee missed; *refused*: the pipeline "
-             "refused with a message; *crash*: anything else (an exception, a time-out, a dead child).", "",
-             "| draws | cases | ok | guarantee | refused | crash |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
-    for row, c in counts.items():
-        n = sum(c.values())
-        name = f"**{row}**" if row == "total" else row
-        lines.append(f"| {name} | {n} | {c['ok']} | {c['guarantee']} | {c['refused']} | {c['crash']} |")
+             "refused with a message; *crash*: anything else (an exception, a time-out, a dead child).", ""]
+    lines += outcome_rows("draws", counts)
     if meta.get("findings"):
         lines += ["", "## Findings", ""] + [f"* {f}" for f in meta["findings"]]
     bad = [r for r in results if r["outcome"] != "ok"]

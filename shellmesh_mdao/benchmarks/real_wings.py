@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .child import failing_stage, run_in_child
+from .page import outcome_rows
 
 __all__ = ["LAYOUTS", "ORIENTATIONS", "DIVISORS", "span_axis", "station_layout", "semi_span", "run_case",
            "run_case_in_child", "matrix_cases", "summary_counts", "write_page"]
@@ -148,12 +149,8 @@ def write_page(results: list, meta: dict, path) -> None:
              + ", ".join(f"`{o}`" for o in ORIENTATIONS) + " and element sizes semi-span / "
              + " and / ".join(str(d) for d in DIVISORS) + " (the harness: `shellmesh_mdao.benchmarks.real_wings`). "
              "*ok*: meshed and every guarantee of `check_guarantees` holds; *guarantee*: meshed, a guarantee "
-             "missed; *refused*: the pipeline refused with a message; *crash*: anything else.", "",
-             "| geometry | cases | ok | guarantee | refused | crash |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
-    for g, c in counts.items():
-        n = sum(c.values())
-        name = f"**{g}**" if g == "total" else g
-        lines.append(f"| {name} | {n} | {c['ok']} | {c['guarantee']} | {c['refused']} | {c['crash']} |")
+             "missed; *refused*: the pipeline refused with a message; *crash*: anything else.", ""]
+    lines += outcome_rows("geometry", counts)
     if meta.get("findings"):
         lines += ["", "## Findings", ""] + [f"* {f}" for f in meta["findings"]]
     bad = [r for r in results if r["outcome"] != "ok"]

@@ -6,7 +6,7 @@ import numpy as np
 
 from .kernels import faces_at
 
-__all__ = ["faces_of", "face_rings", "fixed_edge_mask"]
+__all__ = ["faces_of", "face_rings", "fixed_edge_mask", "canonical_triangles"]
 
 def faces_of(ptr, vf, verts, m):
     """Sorted ids of the faces incident to ``verts`` (CSR ``ptr``/``vf`` of ``m`` faces; a
@@ -34,3 +34,18 @@ def fixed_edge_mask(topo, fixed_edges) -> np.ndarray:
         ids = topo.edge_ids(fe)
         mask[ids[ids >= 0]] = True
     return mask
+
+
+def canonical_triangles(V, T):
+    """A deterministic vertex and triangle order of the triangulation (V, T), whatever order
+    a library wrote it in: vertices sorted by coordinates, triangles rotated to start at their
+    lowest vertex and sorted. Returns (V', T', order): ``T'`` is ``T[order]`` renumbered and
+    rotated (carry per-triangle data along with ``order``)."""
+    vo = np.lexsort(V.T[::-1])
+    rank = np.empty(len(V), np.int64)
+    rank[vo] = np.arange(len(V))
+    T = rank[T]
+    k = np.argmin(T, axis=1)
+    T = T[np.arange(len(T))[:, None], (k[:, None] + np.arange(3)) % 3]
+    to = np.lexsort(T.T[::-1])
+    return V[vo], T[to], to

@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..core.topology import canonical_triangles
 from ..families import SKIN
 from ..mesh import ShellMesh
 from .lofts import (airfoil, body_of_revolution, flat_cap, loft, match_cap, orient_outward, round_cap,
@@ -579,19 +580,6 @@ def aircraft_parts(params: AircraftParams) -> dict:
     return out
 
 
-def _canonical(V, T):
-    """Vertices sorted by coordinates, triangles rotated to start at their lowest vertex and
-    sorted: the same surface gives the same arrays whatever order the union wrote them in."""
-    vo = np.lexsort(V.T[::-1])
-    rank = np.empty(len(V), np.int64)
-    rank[vo] = np.arange(len(V))
-    T = rank[T]
-    k = np.argmin(T, axis=1)
-    T = T[np.arange(len(T))[:, None], (k[:, None] + np.arange(3)) % 3]
-    to = np.lexsort(T.T[::-1])
-    return V[vo], T[to]
-
-
 def aircraft_surface(params: AircraftParams) -> ShellMesh:
     """The aircraft's skin: its parts (:func:`aircraft_parts`) united into one closed,
     consistently oriented (outward) triangulation without self-intersections (manifold3d),
@@ -609,7 +597,7 @@ def aircraft_surface(params: AircraftParams) -> ShellMesh:
     out = U.to_mesh64()
     V = np.asarray(out.vert_properties, np.float64)[:, :3]
     T = np.asarray(out.tri_verts, np.int64).reshape(-1, 3)
-    V, T = _canonical(V, T)
+    V, T, _ = canonical_triangles(V, T)
     return ShellMesh(V, T, np.zeros(len(T), np.int32), [SKIN])
 
 

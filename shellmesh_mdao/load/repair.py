@@ -7,6 +7,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
+from ..core.topology import canonical_triangles
 from ..errors import MeshValidationError
 from ..mesh import ShellMesh
 from .gaps import gap_closures, gap_text
@@ -426,24 +427,11 @@ def _unite_bodies(mesh: ShellMesh, body: np.ndarray, plane, open_body: np.ndarra
             if s is not None:                   # else the cap made by the cut: dropped
                 comp[run[r]:run[r + 1]] = mesh.component[s[fid[run[r]:run[r + 1]]]]
         T, comp = T[comp >= 0], comp[comp >= 0]
-        V, T, comp = _canonical(V, T, comp)
+        V, T, order = canonical_triangles(V, T)
+        comp = comp[order]
         pieces.append(ShellMesh(V, T, comp.astype(np.int32), list(mesh.component_names)).compact()[0])
     from ..mesh import concatenate
     return concatenate(pieces, merge_tol=None), groups
-
-
-def _canonical(V, T, comp):
-    """Deterministic vertex and triangle order (manifold3d's output order is an
-    implementation detail): vertices sorted by coordinates, triangles rotated to start at
-    their lowest vertex and sorted."""
-    vo = np.lexsort(V.T[::-1])
-    rank = np.empty(len(V), np.int64)
-    rank[vo] = np.arange(len(V))
-    T = rank[T]
-    k = np.argmin(T, axis=1)
-    T = T[np.arange(len(T))[:, None], (k[:, None] + np.arange(3)) % 3]
-    to = np.lexsort(T.T[::-1])
-    return V[vo], T[to], comp[to]
 
 
 def describe_surface(mesh: ShellMesh, fmt: str, path: str, counts: dict, notes: list, known: dict | None = None
