@@ -337,7 +337,9 @@ def _turn_note(w: StationWing, box: _Box, ref, tk, T) -> str | None:
     if not len(k):
         return None
     o = w.rib_orientation if isinstance(w.rib_orientation, str) else "the orientation given"
-    names = ", ".join(f"'{rib_name(w.name, int(i))}'" for i in k)
+    names = [f"'{rib_name(w.name, int(i))}'" for i in k]
+    names = ", ".join(names) if len(names) <= 6 else f"{', '.join(names[:3])}, ... {', '.join(names[-2:])} " \
+        f"({len(names)} ribs)"
     ends = " (end_ribs: same: the root and tip ribs still touch their stations)" if \
         w.end_ribs != "station" and (turn[0] > TURN_NOTE or turn[-1] > TURN_NOTE) else ""
     return (f"wing '{w.name}': {'rib' if len(k) == 1 else 'ribs'} {names} turned from {o} towards the station "
