@@ -16,7 +16,7 @@ from shellmesh_mdao.errors import ShellMeshError
 from shellmesh_mdao.geometry import (AircraftParams, StructureParams, aircraft_layout, aircraft_surface,
                                      draw_aircraft, draw_structure, random_aircraft, self_intersections,
                                      surface_defects)
-from shellmesh_mdao.geometry.aircraft import (CHOICES, ORIENTATIONS, RANGES, aircraft_parts, wing_planform,
+from shellmesh_mdao.geometry.aircraft import (CHOICES, MIN_BOX, ORIENTATIONS, RANGES, aircraft_parts, wing_planform,
                                               wing_section)
 
 #: drawn once at random, then fixed (module docstring)
@@ -138,6 +138,13 @@ def test_layout_follows_the_structure_and_the_size():
     # ribs at least 1.5 sizes apart; the root two sizes outboard of the body
     assert (w["ribs"]["count"] - 1) * 1.5 * 0.6 <= w["tip"] - w["root"] + 1e-9 < 15 * 1.5 * 0.6
     assert w["root"] == pytest.approx(wing_planform(p)["body_half_width"] + 1.2)
+    # a surface too short for a box at the size (its stations at most MIN_BOX sizes apart) gets no entry, as
+    # `shellmesh wings` writes none: the fin at 0.3, the tails at 0.4
+    assert [w["name"] for w in aircraft_layout(p, s, size=0.3)["wings"]] == \
+        ["right_wing", "left_wing", "right_htail", "left_htail"]
+    for size in (0.05, 0.3, 0.4):
+        assert all(abs(w["tip"] - w["root"]) > MIN_BOX * size for w in aircraft_layout(p, s, size=size)["wings"])
+    assert [w["name"] for w in aircraft_layout(p, s, size=0.4)["wings"]] == ["right_wing", "left_wing"]
 
 
 def test_layout_stage_measures_the_generated_planform():

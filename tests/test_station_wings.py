@@ -137,6 +137,104 @@ def test_normal_to_spar_fans_out_at_the_root_of_a_swept_wing():
     assert (gap >= 0.5 * (3.8 / 19) - 1e-9).all()                         # half a spacing at both spars
 
 
+def _fin(span, root_chord, tip_chord, sweep_deg, naca):
+    """A fin: a swept NACA wing turned about x, its span along z (up lateral)."""
+    from shellmesh_mdao.mesh import ShellMesh
+
+    S = naca_wing(span=span, root_chord=root_chord, tip_chord=tip_chord, sweep_deg=sweep_deg, dihedral_deg=0.0,
+                  naca=naca)
+    return ShellMesh(S.points[:, [0, 2, 1]] * [1, -1, 1], S.faces, S.component, ["skin"])
+
+
+def _rib_ends_on_spars(lay, wing):
+    """Stations (along the span axis) where each rib meets its first and last spar: (n, 2)."""
+    pf = next(w for w in lay.station_wings if w.name == wing).planform
+    ribs = sorted((m for m in lay.members() if m.kind == "rib"), key=lambda m: m.index)
+    return pf, np.array([[r.start @ pf.axis, r.end @ pf.axis] for r in ribs]), ribs
+
+
+@pytest.mark.parametrize("end_ribs", ["same", "station"])
+def test_ribs_of_a_short_highly_swept_fin_stay_apart(end_ribs):
+    """A fin swept 60 deg, 1.4 long between its stations at element size 0.25 with four ribs normal
+    to the rear spar: ribs normal to the spar reach across the whole station range, so the root
+    and tip ribs (with end_ribs: same too) turn towards their stations until every two neighbours
+    are at least half their spacing and an element size apart at both spars; the root and tip
+    ribs still touch their stations, and the notes name the ribs turned."""
+    fin = _fin(1.5, 2.5, 1.9, 60.0, "0016")
+    d = {"wings": [{"name": "fin", "axis": "z", "root": 0.05, "tip": 1.45, "up": [0, 1, 0],
+                    "ribs": {"count": 4, "orientation": "normal_to_spar", "end_ribs": end_ribs},
+                    "spars": {"chord_fractions": [0.17, 0.5, 0.73]}}]}
+    lay = resolve(fin, d, size=0.25)
+    w = lay.station_wings[0]
+    assert not w.close_pairs
+    pf, ends, ribs = _rib_ends_on_spars(lay, "fin")
+    gap = np.diff(ends, axis=0)
+    assert (gap >= max(0.5 * 1.4 / 3, 0.25) - 1e-9).all(), gap                 # apart at both spars
+    assert ends.min() == pytest.approx(0.05, abs=1e-9) and ends.max() == pytest.approx(1.45, abs=1e-9)
+    assert ends[0].min() == pytest.approx(0.05, abs=1e-9)                       # the root rib touches the root
+    assert ends[-1].max() == pytest.approx(1.45, abs=1e-9)                      # and the tip rib the tip station
+    rear = next(m for m in lay.members() if m.name == "fin/spar_2")
+    rear = (rear.end - rear.start) / np.linalg.norm(rear.end - rear.start)
+    normal = [abs(r.plane_normal @ rear) > 1 - 1e-9 for r in ribs]
+    assert not all(normal)                                                      # some turned ...
+    turned = [r.name for r, nr in zip(ribs, normal) if not nr and (end_ribs == "same" or 0 < r.index < 3)]
+    note = next(n for n in w.notes if "turned from normal_to_spar towards the station direction" in n)
+    assert all(f"'{name}'" in note for name in turned)                          # ... and named
+    if end_ribs == "same":
+        assert "'fin/rib_0'" in note and "'fin/rib_3'" in note
+
+
+def test_a_wing_too_short_for_a_box_at_the_size_says_so(wing):
+    """Root and tip stations closer than 0.2 element sizes: the root and tip ribs coincide, the wing
+    cannot carry a box at that size; the error says so and gives the size that would do."""
+    with pytest.raises(LayoutError, match=r"wing 'w' is only 0\.01 long between its root and tip stations \(0\.100 "
+                                          r"element sizes, .* too short for a wing box at that size; .*element size "
+                                          r"below 0\.05"):
+        resolve(wing, layout(root=3.0, tip=3.01, ribs={"count": 2}))
+
+
+def _web_heights(lay, wing, size):
+    """Smallest height (in element sizes) of each edge web over its span, and its chord fraction."""
+    pf = next(w for w in lay.station_wings if w.name == wing).planform
+    out = {}
+    for m in lay.members():
+        if m.name.endswith("_web"):
+            p = m.seed_points(41)[1:-1]
+            t = p @ pf.axis
+            c = pf.chord_fraction_at(t, pf.x_of(p))
+            out[m.name] = (float(pf.thickness(t, c).min()) / size, float(np.median(c)))
+    return out
+
+
+def test_edge_webs_go_where_the_wing_is_tall_enough():
+    """A thin tail (NACA 0006, tip chord 0.6) with one spar at a coarse size: the webs' preferred
+    place (the rear web at 0.76 of the chord) is less than 0.3 element sizes tall at the tip, so
+    the rear web moves towards the spar to where it is tall enough (the web's place is the
+    tool's choice, not the user's); at a size where no place between the edge and the spar is
+    tall enough, the error says the wing is too thin for a box at that size and gives a size
+    that does."""
+    from shellmesh_mdao.layout.wingbox import MIN_WEB_HEIGHT, WEB_GAP
+
+    tail = naca_wing(span=2.0, root_chord=1.0, tip_chord=0.6, sweep_deg=30.0, naca="0006")
+    d = layout(root=0.05, tip=1.95, ribs={"count": 4}, spars={"chord_fractions": [0.35]})
+    lay = resolve(tail, d, size=0.1)
+    webs = _web_heights(lay, "w", 0.1)
+    assert set(webs) == {"w/le_web", "w/te_web"}
+    assert all(h >= MIN_WEB_HEIGHT for h, _ in webs.values()), webs
+    assert 0.35 < webs["w/te_web"][1] < 0.7 and webs["w/le_web"][1] < 0.35     # each on its side of the spar
+    assert (webs["w/te_web"][1] - 0.35) * 0.6 >= WEB_GAP * 0.1 - 1e-9          # apart from the spar
+    assert any("edge webs" in n and "'w/te_web' at 0.5" in n for n in lay.station_wings[0].notes)
+    with pytest.raises(LayoutError, match=r"wing 'w': with fewer than two spars and a sharp trailing edge the ribs "
+                                          r"end on edge webs, but between its leading edge and its spar at 0\.35 of "
+                                          r"the chord the wing is nowhere at least 0\.3 element sizes .* too thin to "
+                                          r"carry a box at element size 0\.2; use an element size of at most") as e:
+        resolve(tail, d, size=0.2)
+    fit = float(str(e.value).split("of at most ")[1].split(",")[0])
+    assert 0.05 < fit < 0.2
+    lay = resolve(tail, d, size=fit)                                            # the size given does
+    assert all(h >= MIN_WEB_HEIGHT for h, _ in _web_heights(lay, "w", fit).values())
+
+
 def test_crank_kinks_the_spars(wing):
     S = naca_wing(crank=(0.4, 1.3), sweep_deg=20.0)
     # a rib meets the spar 0.04 from the crank: the kink moves to a station a size from it

@@ -19,7 +19,8 @@ the same parameters give the same mesh bit for bit.
 :attr:`StructureParams.tails`, each horizontal-tail half and the fin) by its span axis, root and tip
 stations (the root two element sizes outboard of where it leaves the fuselage, or one size from the
 symmetry plane of a wing without one; the tip two sizes inboard of where the tip cap or the
-winglet begins, and where the wing is at least 0.6 sizes thick), its crank, ``up`` and ``near``;
+winglet begins, and where the wing is at least 0.6 sizes thick; a surface whose stations would be at
+most two sizes apart, too short for a box at that size, gets none), its crank, ``up`` and ``near``;
 :class:`StructureParams` sets the ribs, spars and rib orientation. :func:`random_aircraft` draws
 both from a seed.
 """
@@ -610,18 +611,24 @@ STATION_MARGIN = 2.0
 TIP_THICKNESS = 0.6
 #: with an element size, ribs at least this many sizes apart (fewer ribs than asked on a short surface)
 RIB_GAP = 1.5
+#: a surface whose root and tip stations are at most this many element sizes apart is too short for
+#: a wing box at that size and gets no entry (as ``shellmesh wings`` writes none for it)
+MIN_BOX = 2.0
 
 
 def _station_entry(name, surf: _Surface, sign: float, s_root: float, s_end: float, h: float,
-                   st: StructureParams, up, cranks=()) -> dict:
+                   st: StructureParams, up, cranks=()) -> dict | None:
     """A station-given wing entry for ``surf`` between ``s_root`` and the tip station: two sizes
-    inboard of ``s_end`` and where the surface is at least :data:`TIP_THICKNESS` sizes thick."""
+    inboard of ``s_end`` and where the surface is at least :data:`TIP_THICKNESS` sizes thick;
+    None when those stations are at most :data:`MIN_BOX` sizes apart."""
     s_tip = s_end - STATION_MARGIN * h
     grid = np.linspace(s_root, s_tip, 257)
     _, c, _, t = surf.at(grid)
     thick = grid[t * c >= TIP_THICKNESS * h]
     if len(thick):
         s_tip = float(thick.max())
+    if s_tip - s_root <= MIN_BOX * h:
+        return None
     ax = int(np.argmax(np.abs(surf.axis)))
     base = float(surf.origin[ax])
     le, c, tw, t = surf.at(s_root)
@@ -651,7 +658,8 @@ def aircraft_layout(params: AircraftParams, structure: StructureParams | None = 
     """A layout of station-given wings for :func:`aircraft_surface` (module docstring): the wing
     halves ``right_wing`` and ``left_wing`` (span axis y), with ``structure.tails`` also
     ``right_htail``, ``left_htail`` (y) and ``fin`` (z); stations fitted to the element ``size``
-    (without it: a hundredth of each surface's span)."""
+    (without it: a hundredth of each surface's span); a surface too short for a box at that size
+    (:data:`MIN_BOX`) has no entry."""
     st = structure or StructureParams()
     sh = _shape(params)
     p = params
@@ -678,7 +686,7 @@ def aircraft_layout(params: AircraftParams, structure: StructureParams | None = 
         hf = size if size is not None else fn.span / 100.0
         wings.append(_station_entry("fin", fn, 1.0, sh.fin_base + STATION_MARGIN * hf, fn.span, hf, st,
                                     [0.0, 1.0, 0.0]))
-    return {"wings": wings}
+    return {"wings": [w for w in wings if w is not None]}
 
 
 def random_aircraft(seed=None, size: float | None = None):

@@ -30,8 +30,13 @@ plane, and the tip) or take the ribs' orientation and touch the station at their
 (outboard) end (``end_ribs: same``). Every two neighbouring ribs must stay at least half their
 stations' spacing and one element size (ribs whose stations are closer than that: their
 stations' spacing) apart at both ends, the root and tip ribs included: a rib that would come
-closer, or cross its neighbour, is turned towards the station direction step by step (a fan at the root and tip of a swept wing) until they do. A rib runs from its
-first to its last spar (T-junctions) and crosses the spars between (X-junctions).
+closer, or cross its neighbour, is turned towards the station direction step by step (a fan at
+the root and tip of a swept wing) until they do; with ``end_ribs: same`` the root and tip ribs
+turn too, each still touching its station (on a short, highly swept surface ribs normal to a spar
+would cross from one end station to the other). Turned that way, every rib at last lies along its
+station, so any sweep and aspect ratio has a valid layout when the stations are far enough apart;
+ribs turned by more than :data:`TURN_NOTE` degrees are named in ``StationWing.notes``. A rib runs
+from its first to its last spar (T-junctions) and crosses the spars between (X-junctions).
 
 **Fewer than two spars.** The ribs run from the leading to the trailing edge as closed
 sections (full-chord ribs) when both edges are round or blunt (a blunt trailing edge's base at
@@ -42,11 +47,17 @@ is that sharp at some station the wing gets two **edge webs**, ``<wing>/le_web``
 ``<wing>/te_web``, where the wing is half its largest thickness (the most aft / most forward
 such chord fraction over the span; at least an element size from the edge and the spar, else
 midway between them), and the ribs run between them; ``StationWing.notes`` and
-the report say so.
+the report say so. The webs' place is the tool's choice, so it is one where a web is at least
+:data:`MIN_WEB_HEIGHT` element sizes tall from the root to the tip station: where that one is
+lower, the web moves to the nearest chord fraction of its side of the box that is tall enough
+(:func:`_web_fractions`); where none is, the wing is too thin to carry a box at that size and the
+error says so (its largest thickness there and the element size that would do).
 
 **Checks before meshing** (:class:`~shellmesh_mdao.errors.LayoutError` naming the member and
-the fix): a spar or web less than :data:`MIN_WEB_HEIGHT` element sizes tall somewhere (a web of
-quads that thin cannot be meshed), neighbouring ribs (spars) that cross or coincide (closer than
+the fix): a wing with members whose root and tip stations are closer than
+:data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` element sizes (too short for a box at that
+size: its root and tip ribs would coincide), a spar or web less than :data:`MIN_WEB_HEIGHT`
+element sizes tall somewhere (a web of quads that thin cannot be meshed), neighbouring ribs (spars) that cross or coincide (closer than
 :data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` element sizes; one error names every such
 pair of every wing; closer than an element size but no closer than that, they are meshed with
 smaller elements between them), a member of one wing inside another wing's box (two halves whose
@@ -57,6 +68,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.ndimage import minimum_filter1d
 
 from ..errors import LayoutError
 from ..families import part_name, rib_name, spar_name, web_name
@@ -65,7 +77,7 @@ from .schema import MIN_MEMBER_GAP, Layout, MemberSpec, coincident_parts
 from .stations import StationWing
 
 __all__ = ["resolve_layout", "resolve_station_wing", "PlanformLine", "MIN_WEB_HEIGHT", "MIN_EDGE_ANGLE",
-           "MIN_BASE", "SPAR_TOL", "PLANFORM_TOL"]
+           "MIN_BASE", "SPAR_TOL", "PLANFORM_TOL", "TURN_NOTE", "WEB_GAP"]
 
 #: a spar or web must be at least this many element sizes tall (the project stage's rule for
 #: corner-given spars, ``project.MIN_MEMBER_HEIGHT``; the layout stage cannot import it)
@@ -85,6 +97,12 @@ SPAR_TOL = 0.25
 PLANFORM_TOL = 0.1
 #: rib turning step towards the station direction when two ribs come too close
 _TURN = 0.85
+#: an edge web moved to where the wing is tall enough keeps at least this many element sizes from the
+#: spar and the edges when an element size leaves no room (the 0.2-size coincidence limit of
+#: :data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` and twice the straightening tolerance)
+WEB_GAP = 0.7
+#: ribs turned by more than this many degrees from the orientation asked for are noted
+TURN_NOTE = 0.5
 
 
 # ----------------------------------------------------------------------------- planform lines
@@ -231,9 +249,27 @@ def _rib_ends(box, bounds, tk, xk, T):
     return np.array([bounds[0].cross(tk, xk, T), bounds[-1].cross(tk, xk, T)])
 
 
+def _anchor(box: _Box, bounds, c_mid, tk, T, side) -> tuple:
+    """Station and chordwise anchor of a rib of ``tan(phi) = T`` through the middle of its box
+    that touches the root station (``side`` +1) at its inboard end or the tip station (-1) at its
+    outboard end (``end_ribs: same``), from the first guess ``tk``."""
+    tol = 1e-12 * (box.t1 - box.t0)
+    for _ in range(50):
+        xk = float(bounds[0](tk) + c_mid * (bounds[-1](tk) - bounds[0](tk)))
+        ends = _rib_ends(box, bounds, tk, xk, T)
+        if not np.isfinite(ends).all():
+            break
+        shift = (box.t0 - ends.min()) if side > 0 else (box.t1 - ends.max())
+        tk += shift
+        if abs(shift) <= tol:
+            break
+    return tk, float(bounds[0](tk) + c_mid * (bounds[-1](tk) - bounds[0](tk)))
+
+
 def _layout_ribs(box: _Box, bounds, c_mid, ref, T0=None):
     """Rib stations, anchors and ``tan(phi)`` after the fan relaxation (module docstring);
-    ``T0``: turn no rib further towards its orientation than these ``tan(phi)``."""
+    ``T0``: turn no rib further towards its orientation than these ``tan(phi)``. With
+    ``end_ribs: same`` the root and tip ribs turn too (each still touching its station)."""
     w = box.w
     eta = np.asarray(w.rib_eta, float)
     tk = box.pf.station(eta)
@@ -243,17 +279,21 @@ def _layout_ribs(box: _Box, bounds, c_mid, ref, T0=None):
     if T0 is not None:
         T = np.where(np.abs(T0) < np.abs(T), T0, T)
     fixed = np.zeros(n, bool)
-    if w.end_ribs == "station":
+    same = w.end_ribs != "station"
+    sides = {0: 1.0, n - 1: -1.0} if n >= 2 else {}
+
+    def anchor(k):
+        tk[k], xk[k] = _anchor(box, bounds, c_mid, tk[k], T[k], sides[k])
+
+    if not same:
         T[0] = T[-1] = 0.0
         fixed[0] = fixed[-1] = True
-    elif n:
-        for k, side in ((0, 1.0), (n - 1, -1.0)):       # touch the end station at the inner end
-            for _ in range(3):
-                ends = _rib_ends(box, bounds, tk[k], xk[k], T[k])
-                shift = (box.t0 - ends.min()) if side > 0 else (box.t1 - ends.max())
-                tk[k] += shift
-            xk[k] = float(bounds[0](tk[k]) + c_mid * (bounds[-1](tk[k]) - bounds[0](tk[k])))
-        fixed[0] = fixed[-1] = True
+    elif n == 1:                                          # a lone rib touches the tip station
+        tk[0], xk[0] = _anchor(box, bounds, c_mid, tk[0], T[0], -1.0)
+        fixed[0] = True
+    else:
+        for k in sides:
+            anchor(k)
     if n < 2:
         return tk, xk, T
     gap = np.diff(box.pf.station(eta))
@@ -274,9 +314,37 @@ def _layout_ribs(box: _Box, bounds, c_mid, ref, T0=None):
                     T[r] *= _TURN
                     if abs(T[r]) < 1e-6:
                         T[r] = 0.0
+        for r in sides:
+            if not fixed[r] and (r in bad or r - 1 in bad):
+                anchor(r)
     else:
         T[~fixed] = 0.0
+        for k in sides:
+            if not fixed[k]:
+                anchor(k)
     return tk, xk, T
+
+
+def _turn_note(w: StationWing, box: _Box, ref, tk, T) -> str | None:
+    """The note of the ribs the relaxation turned from the orientation asked for (by more than
+    :data:`TURN_NOTE` degrees), or None."""
+    n = len(tk)
+    asked = np.array([_rib_tan(w.rib_orientation, box, ref, t) for t in tk])
+    turn = np.degrees(np.arctan(np.abs(asked)) - np.arctan(np.abs(T)))
+    if w.end_ribs == "station" and n:
+        turn[0] = turn[-1] = 0.0
+    k = np.flatnonzero(turn > TURN_NOTE)
+    if not len(k):
+        return None
+    o = w.rib_orientation if isinstance(w.rib_orientation, str) else "the orientation given"
+    names = [f"'{rib_name(w.name, int(i))}'" for i in k]
+    names = ", ".join(names) if len(names) <= 6 else f"{', '.join(names[:3])}, ... {', '.join(names[-2:])} " \
+        f"({len(names)} ribs)"
+    ends = " (end_ribs: same: the root and tip ribs still touch their stations)" if \
+        w.end_ribs != "station" and (turn[0] > TURN_NOTE or turn[-1] > TURN_NOTE) else ""
+    return (f"wing '{w.name}': {'rib' if len(k) == 1 else 'ribs'} {names} turned from {o} towards the station "
+            f"direction by up to {turn[k].max():.1f} deg to stay at least half their stations' spacing and an "
+            f"element size apart{ends}")
 
 
 def _edge_angles(pf: Planform, size: float) -> tuple:
@@ -298,18 +366,26 @@ def _edge_angles(pf: Planform, size: float) -> tuple:
     return le_min, te_min
 
 
-def _web_fractions(pf: Planform, spars, size: float, name: str) -> tuple:
-    """Chord fractions of the leading- and trailing-edge webs: where the wing is half its
-    largest thickness, the most aft (front web) and most forward (rear web) over the span, at
-    least an element size from the edges (at the smallest chord) and from the spar; midway
-    between the edge and the spar where there is no room for that."""
+def _web_fractions(pf: Planform, spars, size: float, name: str, edge: str) -> tuple:
+    """Chord fractions of the leading- and trailing-edge webs (``edge``: the sharp edge, for the
+    message). Preferred: where the wing is half its largest thickness, the most aft (front web)
+    and most forward (rear web) over the span, at least an element size from the edges (at the
+    smallest chord) and from the spar; midway between the edge and the spar where there is no
+    room for that. A web must be :data:`MIN_WEB_HEIGHT` element sizes tall over the whole span
+    (strictly between the root and tip stations, as :func:`_spar_height` checks it), with
+    :data:`SPAR_TOL` sizes to spare for its straightening: where the preferred fraction is lower
+    than that, the web moves to the nearest fraction of its side of the box that is tall enough
+    (an element size from the spar and the edges, else :data:`WEB_GAP` sizes). Where none is,
+    the wing cannot carry a box at this size: a LayoutError names the wing, its thickness and the
+    element size that would do."""
     c = np.linspace(0.0, 1.0, 401)
     lo, hi = 0.0, 1.0
     for s in pf.shapes:
         th = pf.thickness(s.station, c)
         over = np.flatnonzero(th >= 0.5 * th.max())
         lo, hi = max(lo, float(c[over[0]])), min(hi, float(c[over[-1]]))
-    g = size / float(np.min(pf.chord(pf.stations)))
+    cmin = float(np.min(pf.chord(pf.stations)))
+    g = size / cmin
     lo, hi = max(lo, g), min(hi, 1.0 - g)
     if spars and lo > min(spars) - g:             # no room: midway between the edge and the spar
         lo = 0.5 * min(spars)
@@ -319,7 +395,64 @@ def _web_fractions(pf: Planform, spars, size: float, name: str) -> tuple:
         raise LayoutError(f"wing '{name}': with fewer than two spars and a sharp edge the ribs end on edge webs, but "
                           f"there is no room for them (chord fractions {lo:.3g} and {hi:.3g}): give two spars or "
                           "use a smaller element size")
-    return lo, hi
+    # the web's height over the span at every fraction (the lowest station), less the straightening
+    st = pf.stations
+    ts = np.unique(np.concatenate([np.linspace(st[0], st[-1], 43)[1:-1], st[1:-1]]))
+    th = np.stack([pf.thickness(t, c) for t in ts])
+    H, tmin = th.min(axis=0), ts[np.argmin(th, axis=0)]
+
+    def room(a, b, hh, pref):
+        """The fraction nearest ``pref`` between ``a`` and ``b`` (0 the leading edge, 1 the
+        trailing edge, else a spar or web) where a web is tall enough at element size ``hh``:
+        an element size from both ends, else :data:`WEB_GAP` sizes from a member; None."""
+        d = int(np.ceil(SPAR_TOL * hh / cmin / (c[1] - c[0])))
+        tall = minimum_filter1d(H, 2 * d + 1, mode="nearest") >= MIN_WEB_HEIGHT * hh
+        if pref is not None and a < pref < b and tall[int(np.argmin(np.abs(c - pref)))]:
+            return pref
+        for gap in (hh / cmin, WEB_GAP * hh / cmin):
+            ga = gap if a > 0.0 else hh / cmin
+            gb = gap if b < 1.0 else hh / cmin
+            ok = np.flatnonzero(tall & (c >= a + ga) & (c <= b - gb))
+            if len(ok):
+                return float(c[ok[np.argmin(np.abs(c[ok] - (pref if pref is not None else 0.5 * (a + b))))]])
+        return None
+
+    def sides(hh, lo_pref, hi_pref):
+        """The front and rear webs' fractions at element size ``hh`` (None where there is no
+        room), and the failing side's bounds."""
+        a, b = 0.0, (min(spars) if spars else 1.0)
+        lo_ = room(a, b, hh, lo_pref)
+        if lo_ is None:
+            return None, None, (a, b, "le")
+        a, b = (max(spars) if spars else lo_), 1.0
+        hi_ = room(a, b, hh, hi_pref)
+        return lo_, hi_, (a, b, "te")
+
+    got_lo, got_hi, (a, b, side) = sides(size, lo, hi)
+    if got_lo is not None and got_hi is not None:
+        return got_lo, got_hi
+    # no room at this size: the wing is too thin there; the largest element size with room for both
+    fit = next((hh for hh in size * 0.98 ** np.arange(1, 400) if None not in sides(hh, None, None)[:2]), None)
+    inside = (c > a) & (c < b)
+    k = int(np.flatnonzero(inside)[np.argmax(H[inside])])
+    if side == "le":
+        where = "between its leading edge and " + (f"its spar at {b:.3g} of the chord" if spars else
+                                                   "its trailing edge")
+    else:
+        where = f"between its {'spar' if spars else 'leading-edge web'} at {a:.3g} of the chord and its trailing edge"
+    need = MIN_WEB_HEIGHT * size
+    if H[k] < need:
+        thick = (f"nowhere at least {MIN_WEB_HEIGHT:g} element sizes ({need:.4g}) thick from its root to its tip "
+                 f"station: at most {H[k]:.4g} ({H[k] / size:.3f} element sizes, at {c[k]:.3g} of the chord, near "
+                 f"station {abs(tmin[k]):.6g})")
+    else:
+        thick = (f"at least {MIN_WEB_HEIGHT:g} element sizes ({need:.4g}) thick from its root to its tip station "
+                 f"only closer than {WEB_GAP:g} element sizes to its {'spar' if spars else 'leading-edge web'}")
+    fix = f"use an element size of at most {fit:.4g}, " if fit is not None else ""
+    raise LayoutError(
+        f"wing '{name}': with fewer than two spars and a sharp {edge} edge the ribs end on edge webs, but {where} "
+        f"the wing is {thick}: it is too thin to carry a box at element size {size:g}; {fix}move the tip (or root) "
+        "station to where the wing is thicker, give it two spars, or leave the wing out of the layout")
 
 
 def _spar_height(box: _Box, line: PlanformLine, t0, t1, n=41):
@@ -340,6 +473,13 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
     layout's default up. Returns the resolved wing (``planform``, ``specs``, ``notes``)."""
     span = abs(w.tip - w.root)
     h = float(size) if size is not None else span / 50.0
+    if span < MIN_MEMBER_GAP * h and (len(w.rib_eta) >= 2 or w.spar_chord):
+        raise LayoutError(
+            f"wing '{w.name}' is only {span:.4g} long between its root and tip stations ({span / h:.3f} element "
+            f"sizes, at least {MIN_MEMBER_GAP:g} needed): its root and tip ribs (the ends of its spars) coincide at "
+            f"element size {h:g}, the surface is too short for a wing box at that size; move its root and tip "
+            f"stations apart, leave the wing out of the layout, or use an element size below "
+            f"{span / MIN_MEMBER_GAP:.4g}")
     pf = measure_planform(points, tris, w.axis, w.root, w.tip, w.cranks, up=w.up if w.up is not None else up,
                           near=w.near, aft=w.aft, tol=PLANFORM_TOL * h, name=w.name)
     box = _Box(w, pf, h)
@@ -354,7 +494,7 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
     if len(spars) < 2:
         le_ang, te_ang = _edge_angles(pf, h)
         if min(le_ang, te_ang) < MIN_EDGE_ANGLE:
-            clo, chi = _web_fractions(pf, spars, h, w.name)
+            clo, chi = _web_fractions(pf, spars, h, w.name, "leading" if le_ang < te_ang else "trailing")
             webs = []
             for nm, c in ((web_name(w.name, "le"), clo), (web_name(w.name, "te"), chi)):
                 xs = box.frac_curve(lambda e, c=c: np.full_like(np.asarray(e, float), c))
@@ -387,6 +527,9 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
         if spars:
             ref = next(ln for nm, j, xs, ln in lines if nm == spar_name(w.name, rs))
     tk, xk, T = _layout_ribs(box, bounds, c_mid, ref, T0)
+    note = _turn_note(w, box, ref, tk, T)
+    if note:
+        notes.append(note)
     # ---------------------------------------------------------------- checks
     close = _close_pairs(w, box, bounds, lines, tk, xk, T, h)
     for nm, j, xs, ln in lines:
@@ -394,11 +537,13 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
         if th < MIN_WEB_HEIGHT * h:
             p = box.point(tmin, float(ln(tmin)))
             edge = "trailing" if cmin > 0.5 else "leading"
+            webs = (web_name(w.name, "le"), web_name(w.name, "te"))       # the webs' place is the tool's
+            what = "" if nm in webs else "the spar away from the {edge} edge, "
             raise LayoutError(
                 f"spar '{nm}' (chord fraction {cmin:.3g} at station {abs(tmin):.6g}) is only {th:.4g} tall near "
                 f"[{', '.join(f'{v:.6g}' for v in p)}], {th / h:.3f} element sizes (at least {MIN_WEB_HEIGHT:g} "
-                f"needed): the wing is too thin there for a web of quads of size {h:g}; move the spar away from the "
-                f"{edge} edge, the tip (or root) station to where the wing is thicker, or use an element size below "
+                f"needed): the wing is too thin there for a web of quads of size {h:g}; move {what.format(edge=edge)}"
+                f"the tip (or root) station to where the wing is thicker, or use an element size below "
                 f"{th / MIN_WEB_HEIGHT:.4g}")
     # ---------------------------------------------------------------- members
     specs = _members(w, box, lines, loop_ribs, bounds, tk, xk, T)
