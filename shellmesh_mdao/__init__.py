@@ -22,8 +22,9 @@ The public API, importable from here::
 :func:`write_mesh`                     .bdf .nas .inp .vtu .msh, by extension
 :func:`element_quality`,               per-element metrics; a summary (per component)
 :func:`quality_summary`
-:func:`check_guarantees`               raise :class:`MeshValidationError` when a final mesh
-                                       misses a guarantee (all quads, scaled Jacobian > 0.2, ...)
+:func:`check_guarantees`               raise :class:`GuaranteeError` when a final mesh misses a
+                                       guarantee (all quads, scaled Jacobian > 0.2, ...);
+                                       ``run_pipeline`` refuses such a mesh itself
 :func:`naca_wing`,                     the bundled default wing and its layout
 :func:`naca_wing_layout`
 errors                                 :class:`ShellMeshError` and its subclasses
@@ -36,7 +37,7 @@ from __future__ import annotations
 
 import importlib
 
-from .errors import (ImprintError, InputFileError, LayoutError, MeshValidationError, OutputError,
+from .errors import (GuaranteeError, ImprintError, InputFileError, LayoutError, MeshValidationError, OutputError,
                      ProjectionError, ShellMeshError, SizeError, SolverError)
 
 __version__ = "0.1.0"
@@ -56,7 +57,7 @@ _LAZY = {
 
 __all__ = sorted(_LAZY) + ["ShellMeshError", "InputFileError", "MeshValidationError", "LayoutError",
                            "ProjectionError", "ImprintError", "SizeError", "OutputError", "SolverError",
-                           "__version__"]
+                           "GuaranteeError", "__version__"]
 
 
 def __getattr__(name: str):

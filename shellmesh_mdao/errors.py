@@ -7,7 +7,7 @@ is an internal error (exit code 1, with a request to report it).
 """
 
 __all__ = ["ShellMeshError", "InputFileError", "MeshValidationError", "LayoutError", "ProjectionError",
-           "ImprintError", "SizeError", "OutputError", "SolverError"]
+           "ImprintError", "SizeError", "OutputError", "SolverError", "GuaranteeError"]
 
 
 class ShellMeshError(Exception):
@@ -20,6 +20,12 @@ class InputFileError(ShellMeshError):
 
 class MeshValidationError(ShellMeshError):
     """A mesh violates a topological or geometric requirement (open, non-manifold, NaN, ...)."""
+
+
+class GuaranteeError(MeshValidationError):
+    """A finished mesh misses one of the README's guarantees
+    (:func:`~shellmesh_mdao.guarantees.check_guarantees`): the pipeline refuses it instead of
+    returning or writing it."""
 
 
 class LayoutError(ShellMeshError):

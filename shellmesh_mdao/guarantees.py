@@ -3,7 +3,7 @@
 Every run of :func:`~shellmesh_mdao.pipeline.run_pipeline` to its last stage must give a mesh
 with the properties below. :func:`check_guarantees` checks them in this order on the
 :class:`~shellmesh_mdao.pipeline.PipelineResult` and raises
-:class:`~shellmesh_mdao.errors.MeshValidationError` at the first one missed; its message names
+:class:`~shellmesh_mdao.errors.GuaranteeError` (a ``MeshValidationError``) at the first one missed; its message names
 the guarantee, the figure measured and the place (element, node or edge, with coordinates).
 When all hold it returns the measured figures. The tests, the stress sweep
 (:mod:`shellmesh_mdao.benchmarks.stress`) and the benchmark use it.
@@ -61,13 +61,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import MeshValidationError
+from .errors import GuaranteeError
 from .families import is_member
 from .quad.finish import POOR_JACOBIAN
 from .quality import element_quality
 from .core.supports import FIXED, PLANE, SURFACE
 
-__all__ = ["GUARANTEES", "check_guarantees", "member_faces"]
+__all__ = ["GUARANTEES", "MAX_FIXED", "MAX_FIXED_NON_PLANAR", "check_guarantees", "gate_flags", "member_faces"]
 
 #: the guarantees :func:`check_guarantees` checks, in its order (the names its errors use)
 GUARANTEES = ("final mesh", "all quads", "scaled Jacobian", "poor elements reported", "no duplicate points",
@@ -111,22 +111,43 @@ def _edge(mesh, a, b) -> str:
 
 
 def _missed(name: str, figure: str, place: str = "") -> None:
-    raise MeshValidationError(f"mesh guarantee {name!r} missed: {figure}" + (f", at {place}" if place else ""))
+    raise GuaranteeError(f"mesh guarantee {name!r} missed: {figure}" + (f", at {place}" if place else ""))
 
 
-def check_guarantees(result, input_closed: bool = True, min_sj: float = 0.2, free_edges: bool = False,
-                     max_fixed: float = 0.05) -> dict:
+#: the largest share of FIXED nodes; with non-planar explicit members, whose nodes do not move
+MAX_FIXED, MAX_FIXED_NON_PLANAR = 0.05, 0.15
+
+
+def gate_flags(result) -> dict:
+    """The flags of :func:`check_guarantees` that follow from the run itself: ``input_closed``
+    (the load report says the input skin was closed), ``free_edges`` (an open input, a half
+    model, or explicit members, whose straight end lines may be attached to nothing) and
+    ``max_fixed`` (:data:`MAX_FIXED_NON_PLANAR` with non-planar explicit members, else
+    :data:`MAX_FIXED`)."""
+    closed = bool(result.report.get("surface", {}).get("closed", True))
+    lay = getattr(result, "layout", None)
+    specs = lay.members() if hasattr(lay, "members") else []
+    explicit = any(m.kind == "explicit" for m in specs)
+    non_planar = any(m.kind == "explicit" and not m.is_planar for m in specs)
+    return {"input_closed": closed, "free_edges": (not closed) or explicit,
+            "max_fixed": MAX_FIXED_NON_PLANAR if non_planar else MAX_FIXED}
+
+
+def check_guarantees(result, input_closed: bool | None = None, min_sj: float = 0.2,
+                     free_edges: bool | None = None, max_fixed: float | None = None) -> dict:
     """Check the guarantees of the final mesh of ``result`` (a
     :class:`~shellmesh_mdao.pipeline.PipelineResult` of a run to the quad stage), in the order
     of the module's table (:data:`GUARANTEES`).
 
+    ``input_closed``, ``free_edges``, ``max_fixed``: None (default) takes them from the run
+    (:func:`gate_flags`), as the pipeline's own gate does.
     ``input_closed``: the input skin was closed, so the output skin must be. ``min_sj``: every
     element's scaled Jacobian is above it (0.2 for layouts whose member curves cross at
     reasonable angles; two curves crossing at an angle ``a`` leave a corner of ``a``).
     ``free_edges``: members may have free edges (an explicit member's straight end line inside
     the wing, attached to nothing). ``max_fixed``: the largest share of FIXED nodes.
 
-    Raises :class:`~shellmesh_mdao.errors.MeshValidationError` naming the first guarantee
+    Raises :class:`~shellmesh_mdao.errors.GuaranteeError` naming the first guarantee
     missed, the figure and the place. Returns the measured figures: ``n_elements``,
     ``n_points``, ``min_scaled_jacobian``, ``n_poor`` (elements at or below 0.2),
     ``junction_valence`` ({faces per junction edge: how many edges}), ``skin_boundary_edges``,
@@ -134,6 +155,10 @@ def check_guarantees(result, input_closed: bool = True, min_sj: float = 0.2, fre
     (farther than 1e-6 of the diagonal), ``skin_on_surface_share``, ``planarize_moved``,
     ``n_fixed``, ``fixed_share`` and ``quality`` (the arrays of
     :func:`~shellmesh_mdao.quality.element_quality`)."""
+    flags = gate_flags(result)
+    input_closed = flags["input_closed"] if input_closed is None else input_closed
+    free_edges = flags["free_edges"] if free_edges is None else free_edges
+    max_fixed = flags["max_fixed"] if max_fixed is None else max_fixed
     q = result.mesh
     if result.stage != "quad":
         _missed("final mesh", f"the result stops at stage {result.stage!r}; the guarantees are those of the "

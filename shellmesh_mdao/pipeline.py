@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import SizeError, ShellMeshError
+from .errors import GuaranteeError, SizeError, ShellMeshError
 from .families import SKIN
 from .mesh import ShellMesh, norm_rows
 from .options import PipelineOptions
@@ -30,7 +30,7 @@ from .options import PipelineOptions
 log = logging.getLogger("shellmesh_mdao")
 
 __all__ = ["STAGES", "REMESH_FACTOR", "PipelineOptions", "PipelineState", "PipelineResult", "one_blas_thread",
-           "check_size", "stage_load", "stage_layout", "stage_project", "stage_remesh", "stage_imprint",
+           "check_size", "gate", "stage_load", "stage_layout", "stage_project", "stage_remesh", "stage_imprint",
            "stage_members", "stage_split", "stage_merge", "stage_smooth", "stage_quad", "run_stage", "run_pipeline"]
 
 #: Stages in order; ``--until`` takes one of these.
@@ -320,18 +320,42 @@ def stage_smooth(state: PipelineState) -> PipelineState:
     return st
 
 
-def stage_quad(state: PipelineState) -> PipelineState:
+def stage_quad(state: PipelineState, check: bool = True) -> PipelineState:
     """One subdivision to all quads (quad -> 4, triangle -> 3) over skin and members, new nodes
     projected onto their supports, then the final smoothing, the repair of poor elements and the
     flattening of warped quads (:func:`~shellmesh_mdao.quad.quad_mesh`: the policy, its options
-    and report keys)."""
+    and report keys). Then the gate (``check``, default True): :func:`gate` refuses a mesh that
+    misses a guarantee."""
     from .quad import quad_mesh
 
     _need(state, "quad")
     q, sup, report = quad_mesh(state.mesh, state.supports, state.size, state.options.quad, state.options.smooth)
     st = state.but(mesh=q, supports=sup, stage="quad")
     st.report.update(report)
+    if check:
+        gate(st)
     return st
+
+
+def gate(state: PipelineState) -> dict:
+    """The guarantees of the final mesh (:func:`~shellmesh_mdao.guarantees.check_guarantees`,
+    flags from the run: :func:`~shellmesh_mdao.guarantees.gate_flags`), their figures into the
+    report's ``guarantees``. A mesh that misses one is refused: :class:`GuaranteeError` naming
+    the guarantee, the figure and the place, and what to do; nothing is returned or written."""
+    from .guarantees import check_guarantees
+
+    res = PipelineResult(state.mesh, state.report, surface=state.surface, layout=state.layout,
+                         chains=state.chains, stage=state.stage, state=state)
+    try:
+        figures = check_guarantees(res)
+    except GuaranteeError as e:
+        raise GuaranteeError(f"{e}. The mesh is refused (nothing written): a mesh that misses a guarantee of "
+                             "the README is an error, not a warning. A slightly different --size (a few "
+                             "per cent) or moving the nearest member by about an element may avoid it; "
+                             "please report the input and the command, it is a defect of the mesher "
+                             "(run_pipeline(..., check=False) returns the mesh for inspection)") from e
+    state.report["guarantees"] = {k: v for k, v in figures.items() if k != "quality"}
+    return figures
 
 
 _STAGE_FUNCS = {"project": stage_project, "remesh": stage_remesh, "imprint": stage_imprint,
@@ -353,7 +377,7 @@ def run_stage(state: PipelineState, name: str, *, remesh_cache=None) -> Pipeline
 
 def run_pipeline(surface, layout, size, *, until: str = STAGES[-1], progress: bool = True,
                  remesh: bool = True, options: dict | PipelineOptions | None = None,
-                 remesh_cache=True) -> PipelineResult:
+                 remesh_cache=True, check: bool = True) -> PipelineResult:
     """Run the stages up to ``until`` on ``surface`` (path or :class:`ShellMesh`) with the member
     ``layout`` (path, dict or :class:`~shellmesh_mdao.layout.Layout`) at target quad size
     ``size``. ``options``: :class:`PipelineOptions` or a dict of them (solver options);
@@ -363,7 +387,12 @@ def run_pipeline(surface, layout, size, *, until: str = STAGES[-1], progress: bo
     :data:`~shellmesh_mdao.remesh.DEFAULT_REMESH_CACHE`, so a loop over layouts on one surface,
     size and options remeshes once (the skin does not depend on the layout; a hit is the same skin
     bit for bit); a :class:`~shellmesh_mdao.remesh.RemeshCache` uses that one; False or None
-    remeshes every time."""
+    remeshes every time.
+
+    ``check`` (default True): a run to the last stage passes the gate (:func:`gate`): a mesh that
+    misses a guarantee of the README raises :class:`~shellmesh_mdao.errors.GuaranteeError`
+    instead of being returned; its figures are in the report's ``guarantees``. False returns
+    such a mesh, for inspection only."""
     if until not in STAGES:
         raise ShellMeshError(f"unknown stage {until!r}; --until takes one of: {', '.join(STAGES)}")
     if remesh_cache is True:
@@ -384,6 +413,8 @@ def run_pipeline(surface, layout, size, *, until: str = STAGES[-1], progress: bo
                 state = stage_layout(state, layout)
             elif name == "remesh":
                 state = stage_remesh(state, remesh_cache)
+            elif name == "quad":
+                state = stage_quad(state, check)
             else:
                 state = _STAGE_FUNCS[name](state)
     state.report["stages"] = seconds

@@ -91,7 +91,7 @@ def run_case(seed: int) -> dict:
         out["n_input_triangles"] = int(skin.n_faces)
         out["wings"] = [w["name"] for w in lay["wings"]]
         out["stage"] = ""
-        res = run_pipeline(skin, lay, case["size"], progress=False)
+        res = run_pipeline(skin, lay, case["size"], progress=False, check=False)   # classified below
         out["n_elements"] = int(res.mesh.n_faces)
         try:
             g = check_guarantees(res)

@@ -90,11 +90,11 @@ def run_case(geometry_dir, geometry: str, layout_name: str, orientation: str, di
         lay = station_layout(mesh.points, mesh.faces[:, :3], axis, size, ribs, spars, orientation)
         out["wings"] = [f"{w['name']} {w['root']:.4g}..{w['tip']:.4g}" for w in lay["wings"]]
         out["stage"] = ""
-        res = run_pipeline(mesh, lay, size, progress=False)
+        res = run_pipeline(mesh, lay, size, progress=False, check=False)   # classified below
         out["n_elements"] = int(res.mesh.n_faces)
         out["notes"] = [n for w in res.report.get("wings", {}).values() for n in w.get("notes", [])]
         try:
-            g = check_guarantees(res, input_closed=bool(rep.closed), free_edges=not rep.closed)
+            g = check_guarantees(res)
             out["min_sj"] = float(g["min_scaled_jacobian"])
             out["outcome"] = "ok"
         except MeshValidationError as e:
