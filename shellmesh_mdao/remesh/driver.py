@@ -14,6 +14,7 @@ from ..options import RemeshOptions
 from .common import CORNER, REGULAR, SPLIT_RATIO, tri_angles
 from .operations import collapse_edges, collapse_round, faces_facing_ok, flip_round, micro_round, phase, split_round
 from .relax import relax_vertices
+from .stars import contract_pinched_stars
 from .surface import InputSurface
 from .work import Context, WorkMesh
 
@@ -123,6 +124,18 @@ def _unstand_round(W, ctx):
     e = e[e >= 0]
     L = edge_lengths(W.P, T.E[e])
     return collapse_edges(W, ctx, T, e, prio=-L, check_geometry=False)
+
+
+def _contract_pinched(W, ctx, max_rounds=8):
+    """:func:`~.stars.contract_pinched_stars` until it stalls (each round raises the smallest
+    angle of every star it changes); the number of nodes removed."""
+    total = 0
+    for _ in range(max_rounds):
+        k = contract_pinched_stars(W, ctx)
+        total += k
+        if not k:
+            break
+    return total
 
 
 def _finish(W, ctx, rounds, timings, log):
@@ -392,6 +405,12 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = Re
         # off the surface on straight_wing stress seed 58)
         phase(_cleanup_round, W, ctx, 3, 10.0)
         phase(flip_round, W, ctx, 5, "angle")
+    # last: the stars of corners and chain nodes with three or four neighbours that keep a sliver no
+    # edge operation removes (a sharp trailing edge ending in a tip thinner than max_deviation; once
+    # here, after every global round, so that only those stars change)
+    n_pinched = _contract_pinched(W, ctx)
+    if n_pinched:
+        phase(flip_round, W, ctx, 5, "angle")
     # ---------------------------------------------------------------- output
     dm, dc, ctri, ok = _deviation(W, ctx, mids)
     comp = surf.tri_comp[ctri]
@@ -413,6 +432,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = Re
             report["edge_length_percentiles_unrefined"] = {p: float(np.percentile(L[flat], p) / target)
                                                           for p in pct}
         report.update(dict(timings=timings, deviation_passes=passes, n_deviation_splits=n_dev_splits,
+                           n_pinched_contracted=int(n_pinched),
                            n_standing_faces=int(len(_standing_faces(W, ctx))),
                            n_input_triangles=len(surf.T),
                            n_feature_chains=int(surf.n_chains), n_corners=int((W.kind == CORNER).sum()),

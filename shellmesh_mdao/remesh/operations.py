@@ -13,8 +13,8 @@ from ..mesh import cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
 from .common import (CHAIN, COLLAPSE_RATIO, CORNER, COS_FACING, COS_TURNED, REGULAR, SPLIT_RATIO, csr_entries,
                      min_angle_of, rank_candidates, tri_angles, tri_min_angle, tri_normals)
 
-__all__ = ["faces_facing_ok", "micro_round", "split_round", "collapse_round", "collapse_edges", "flip_round",
-           "phase"]
+__all__ = ["faces_facing_ok", "micro_round", "split_round", "collapse_round", "chain_keeps", "collapse_edges",
+           "flip_round", "phase"]
 
 # einsum's dot, its norm and unit rows (mesh.dot_rows & co.: compiled for (k, 3) rows)
 _dot, _norm, _unit = dot_rows, dot_norm_rows, dot_unit_rows
@@ -254,6 +254,19 @@ def collapse_round(W, ctx, max_normal_turn=45.0, quality=False):
                            quality=quality, remove_first=v3)
 
 
+def chain_keeps(W, ctx):
+    """Per vertex: not on a chain, or its chain keeps enough vertices without it (a closed chain
+    three, a chain through one corner two)."""
+    ok = np.ones(W.n, bool)
+    s = ctx.surf
+    if s is not None and s.n_chains:
+        cv = W.kind == CHAIN
+        cnt = np.bincount(W.vchain[cv], minlength=s.n_chains)
+        need = np.where(s.ch_closed, 3, np.where(s.ch_first_v == s.ch_last_v, 2, 0))
+        ok[cv] = cnt[W.vchain[cv]] > need[W.vchain[cv]]
+    return ok
+
+
 def collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, max_len_ratio=SPLIT_RATIO,
                     remove_first=None, check_geometry=True):
     """Collapse a maximal independent set of the candidate edges ``cand`` (higher ``prio``
@@ -273,14 +286,7 @@ def collapse_edges(W, ctx, T, cand, prio, max_normal_turn=45.0, quality=False, m
     isf, _ = W.feature_lookup(T)
     nptr, nbr = T.vertex_neighbors()
     fptr, vf = T.vertex_faces(F)
-    # chain vertex counts (a closed chain keeps >= 3 vertices, a chain through one corner >= 2)
-    chain_ok_v = np.ones(n, bool)
-    if ctx.surf is not None and ctx.surf.n_chains:
-        s = ctx.surf
-        cnt = np.bincount(W.vchain[W.kind == CHAIN], minlength=s.n_chains)
-        need = np.where(s.ch_closed, 3, np.where(s.ch_first_v == s.ch_last_v, 2, 0))
-        cv = W.kind == CHAIN
-        chain_ok_v[cv] = cnt[W.vchain[cv]] > need[W.vchain[cv]]
+    chain_ok_v = chain_keeps(W, ctx)
     # ---- cheap tests: opposite valences, link condition, no pinching, vertex kinds (dangling
     #      feature-line ends listed in remove_first may go along their line; an edge at a
     #      vertex to be removed may only remove that vertex), in one compiled pass
