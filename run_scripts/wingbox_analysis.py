@@ -1,7 +1,7 @@
 """The main job: mesh the bundled default wing box and analyse it with CalculiX, through OpenMDAO.
 
     python run_scripts/wingbox_analysis.py                 # size 0.1 m (~1-2 min on 2 cores)
-    python run_scripts/wingbox_analysis.py --size 0.2      # coarser, faster
+    python run_scripts/wingbox_analysis.py --size 0.15     # coarser, faster
 
 Model (``om.Problem``): :class:`~shellmesh_mdao.components.group.ShellMeshGroup` on the bundled
 default wing (NACA 2412, 6 m semi-span, ``geometry.naca_wing()``) with its default layout
