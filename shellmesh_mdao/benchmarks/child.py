@@ -11,8 +11,9 @@ from __future__ import annotations
 import multiprocessing as mp
 import resource
 import time
+import traceback
 
-__all__ = ["run_in_child", "failing_stage"]
+__all__ = ["run_in_child", "failing_stage", "classify_case"]
 
 
 def _child(conn, fn, args, kwargs):
@@ -72,3 +73,34 @@ def failing_stage(tb, default: str = "") -> str:
             stage = name[len("stage_"):]
         tb = tb.tb_next
     return stage
+
+
+def classify_case(out: dict, run) -> dict:
+    """Run one harness case and classify it into ``out``; never raises. ``run(out)`` builds the
+    case (setting ``out["stage"]`` while it prepares it, and any keys of its own) and returns the
+    pipeline's result, run with ``check=False``. ``out["outcome"]``: **ok** (every guarantee of
+    :func:`~shellmesh_mdao.guarantees.check_guarantees` holds; ``min_sj``), **guarantee** (meshed,
+    one missed), **refused** (a :class:`~shellmesh_mdao.errors.ShellMeshError`) or **crash**
+    (anything else; ``traceback``), with ``error``, ``stage``, ``n_elements`` and ``seconds``."""
+    from ..errors import MeshValidationError, ShellMeshError
+    from ..guarantees import check_guarantees
+
+    out.update(outcome="crash", error="", stage="")
+    t0 = time.perf_counter()
+    try:
+        res = run(out)
+        out["n_elements"] = int(res.mesh.n_faces)
+        try:
+            out["min_sj"] = float(check_guarantees(res)["min_scaled_jacobian"])
+            out["outcome"] = "ok"
+        except MeshValidationError as e:
+            out["outcome"], out["stage"], out["error"] = "guarantee", "guarantees", str(e)
+    except ShellMeshError as e:
+        out["outcome"], out["error"] = "refused", f"{type(e).__name__}: {e}"
+        out["stage"] = failing_stage(e.__traceback__) or out["stage"]
+    except Exception as e:  # noqa: BLE001 -- any other exception is a crash, recorded
+        out["outcome"], out["error"] = "crash", f"{type(e).__name__}: {e}"
+        out["stage"] = failing_stage(e.__traceback__, out["stage"])
+        out["traceback"] = traceback.format_exc()[-3000:]
+    out["seconds"] = round(time.perf_counter() - t0, 1)
+    return out

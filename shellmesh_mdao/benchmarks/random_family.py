@@ -18,13 +18,11 @@ refused with a message) or **crash** (any other exception, a time-out or a dead 
 """
 from __future__ import annotations
 
-import time
-import traceback
 from pathlib import Path
 
 import numpy as np
 
-from .child import failing_stage, run_in_child
+from .child import classify_case, run_in_child
 from .page import outcome_rows
 
 __all__ = ["DIVISOR_RANGE", "BANDS", "draw_case", "run_case", "run_case_in_child", "summary_counts",
@@ -74,14 +72,10 @@ def describe_params(params: dict) -> str:
 
 def run_case(seed: int) -> dict:
     """Draw, build and mesh case ``seed`` and classify it (module docstring); never raises."""
-    from ..errors import MeshValidationError, ShellMeshError
     from ..geometry.aircraft import aircraft_layout, aircraft_surface
-    from ..guarantees import check_guarantees
     from ..pipeline import run_pipeline
 
-    out = {"seed": int(seed), "outcome": "crash", "error": "", "stage": ""}
-    t0 = time.perf_counter()
-    try:
+    def run(out):
         case = draw_case(seed)
         out.update(params=case["params"].to_dict(), structure=case["structure"].to_dict(),
                    divisor=case["divisor"], size=case["size"], mean_chord=case["mean_chord"])
@@ -91,23 +85,9 @@ def run_case(seed: int) -> dict:
         out["n_input_triangles"] = int(skin.n_faces)
         out["wings"] = [w["name"] for w in lay["wings"]]
         out["stage"] = ""
-        res = run_pipeline(skin, lay, case["size"], progress=False, check=False)   # classified below
-        out["n_elements"] = int(res.mesh.n_faces)
-        try:
-            g = check_guarantees(res)
-            out["min_sj"] = float(g["min_scaled_jacobian"])
-            out["outcome"] = "ok"
-        except MeshValidationError as e:
-            out["outcome"], out["stage"], out["error"] = "guarantee", "guarantees", str(e)
-    except ShellMeshError as e:
-        out["outcome"], out["error"] = "refused", f"{type(e).__name__}: {e}"
-        out["stage"] = failing_stage(e.__traceback__) or out["stage"]
-    except Exception as e:  # noqa: BLE001 -- any other exception is a crash, recorded
-        out["outcome"], out["error"] = "crash", f"{type(e).__name__}: {e}"
-        out["stage"] = failing_stage(e.__traceback__, out["stage"])
-        out["traceback"] = traceback.format_exc()[-3000:]
-    out["seconds"] = round(time.perf_counter() - t0, 1)
-    return out
+        return run_pipeline(skin, lay, case["size"], progress=False, check=False)   # classified by classify_case
+
+    return classify_case({"seed": int(seed)}, run)
 
 
 def run_case_in_child(seed: int, timeout: float = 1800.0) -> dict:

@@ -24,13 +24,11 @@ refused with a message) or **crash** (any other exception, a time-out or a dead 
 from __future__ import annotations
 
 import json
-import time
-import traceback
 from pathlib import Path
 
 import numpy as np
 
-from .child import failing_stage, run_in_child
+from .child import classify_case, run_in_child
 from .page import outcome_rows
 
 __all__ = ["LAYOUTS", "ORIENTATIONS", "DIVISORS", "span_axis", "station_layout", "semi_span", "run_case",
@@ -71,18 +69,13 @@ def station_layout(points, tris, axis: str, size: float, ribs: int, spars, orien
 
 def run_case(geometry_dir, geometry: str, layout_name: str, orientation: str, divisor: int) -> dict:
     """Run one case end to end and classify it (module docstring); never raises."""
-    from ..errors import MeshValidationError, ShellMeshError
-    from ..guarantees import check_guarantees
     from ..load import load_surface
     from ..pipeline import run_pipeline
 
-    out = {"geometry": geometry, "layout": layout_name, "orientation": orientation, "divisor": divisor,
-           "outcome": "crash", "error": "", "stage": ""}
-    t0 = time.perf_counter()
-    try:
+    def run(out):
         manifest = json.loads((Path(geometry_dir) / "manifest.json").read_text())
         ribs, spars = LAYOUTS[layout_name]
-        mesh, rep = load_surface(Path(geometry_dir) / manifest["geometries"][geometry]["file"])
+        mesh, _ = load_surface(Path(geometry_dir) / manifest["geometries"][geometry]["file"])
         axis = span_axis(manifest, geometry)
         size = semi_span(mesh.points, axis) / divisor
         out["size"] = size
@@ -90,24 +83,12 @@ def run_case(geometry_dir, geometry: str, layout_name: str, orientation: str, di
         lay = station_layout(mesh.points, mesh.faces[:, :3], axis, size, ribs, spars, orientation)
         out["wings"] = [f"{w['name']} {w['root']:.4g}..{w['tip']:.4g}" for w in lay["wings"]]
         out["stage"] = ""
-        res = run_pipeline(mesh, lay, size, progress=False, check=False)   # classified below
-        out["n_elements"] = int(res.mesh.n_faces)
+        res = run_pipeline(mesh, lay, size, progress=False, check=False)   # classified by classify_case
         out["notes"] = [n for w in res.report.get("wings", {}).values() for n in w.get("notes", [])]
-        try:
-            g = check_guarantees(res)
-            out["min_sj"] = float(g["min_scaled_jacobian"])
-            out["outcome"] = "ok"
-        except MeshValidationError as e:
-            out["outcome"], out["stage"], out["error"] = "guarantee", "guarantees", str(e)
-    except ShellMeshError as e:
-        out["outcome"], out["error"] = "refused", f"{type(e).__name__}: {e}"
-        out["stage"] = failing_stage(e.__traceback__) or out["stage"]
-    except Exception as e:  # noqa: BLE001 -- any other exception is a crash, recorded
-        out["outcome"], out["error"] = "crash", f"{type(e).__name__}: {e}"
-        out["stage"] = failing_stage(e.__traceback__)
-        out["traceback"] = traceback.format_exc()[-3000:]
-    out["seconds"] = round(time.perf_counter() - t0, 1)
-    return out
+        return res
+
+    return classify_case({"geometry": geometry, "layout": layout_name, "orientation": orientation,
+                          "divisor": divisor}, run)
 
 
 
