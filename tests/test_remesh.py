@@ -283,11 +283,14 @@ def test_remesh_is_deterministic(geometry_dir, manifest):
 
 
 def test_deviation_passes_run_only_above_their_fraction(geometry_dir, manifest):
-    # cessna210 at 0.5: 104 of about 15,800 edges (0.7 %) deviate more than max_deviation after
+    # cessna210 at 0.5: 89 of about 16,500 edges (0.5 %) deviate more than max_deviation after
     # the sweeps. With remesh_pass_fraction 0.01 no pass runs (the same mesh as without
     # passes, bit for bit), with 0.005 they do (another mesh). The deviation splits keep the
     # bound either way, but for the edges they may not split (a new angle below 20 degrees):
-    # 9 of them without the passes, up to 1.34 max_deviation; none with them
+    # 8 of them without the passes, up to 1.91 max_deviation; none with them. Without the
+    # passes that figure is one edge's and moves with the last bits of the input: on the input
+    # and seven copies with coordinates multiplied by 1 + 1e-10 g it spans 1.32-1.91 (1.32-2.46
+    # before the remesh's turning bound, 1.34 on the input itself)
     skin, _ = load_surface(geometry_dir / manifest["geometries"]["cessna210"]["file"])
     target = 0.5
     delta = RemeshOptions.remesh_deviation * target
@@ -298,7 +301,7 @@ def test_deviation_passes_run_only_above_their_fraction(geometry_dir, manifest):
     assert np.array_equal(none.points, above.points) and np.array_equal(none.faces, above.faces)
     assert ran.n_faces != none.n_faces or not np.array_equal(ran.points, none.points)
     assert r2["deviation_edge_midpoints"] <= MAX_DEV["cessna210"] * delta
-    assert r0["deviation_edge_midpoints"] <= 1.5 * delta and r0["n_edges_over_deviation"] <= 20
+    assert r0["deviation_edge_midpoints"] <= 2.5 * delta and r0["n_edges_over_deviation"] <= 20
 
 
 def test_input_resolution_does_not_set_output_resolution(corpus):
@@ -554,3 +557,31 @@ def test_run_pipeline_remeshes_once_per_surface_size_and_options():
     assert cache.stats["misses"] == 3 and len(cache) == 2
     with pytest.raises(ValueError, match="at least 1"):
         RemeshCache(0)
+
+
+@pytest.mark.parametrize("target", [0.2, 0.4])
+def test_leading_edge_nose_is_resolved_not_cut_across(target):
+    """The bundled wing (NACA 2412, leading-edge radius r = 16-32 mm) at target edges 0.2 and 0.4
+    (sizes 0.1 and 0.2): the chord bound (deviation 0.1 target) lets an edge cut across a nose of
+    radius below 2 max_deviation, which deviates by at most r from any chord. Before the turning
+    bound 11 faces stood more than 90 degrees from the input normal across the nose at both
+    targets, and the mid-span nose (within r / 2 of the leading edge) held 79 and 2 edges; the
+    remesh now follows the nose, with edges of about 1.7 r there."""
+    from shellmesh_mdao.geometry import naca_wing
+    skin = naca_wing()
+    out = remesh_skin(skin, target)
+    loc = SurfaceLocator.from_mesh(skin)
+    tris, _ = skin.triangles()
+    P = skin.points
+    nin = np.cross(P[tris[:, 1]] - P[tris[:, 0]], P[tris[:, 2]] - P[tris[:, 0]])
+    nin /= np.linalg.norm(nin, axis=1, keepdims=True)
+    _, ct, _ = loc.closest(out.face_centroids())
+    assert (np.einsum("ij,ij->i", out.face_normals(), nin[ct]) > 0).all()
+    E = out.edges()
+    mid = 0.5 * (out.points[E[:, 0]] + out.points[E[:, 1]])
+    y = mid[:, 1]
+    r = 1.1019 * 0.12 ** 2 * (2.0 - y / 6.0)                  # nose radius of the local chord
+    nose = (mid[:, 0] - y * np.tan(np.radians(10.0)) < 0.5 * r) & (y > 1.5) & (y < 4.5)
+    assert nose.sum() >= 100
+    L = np.linalg.norm(out.points[E[:, 0]] - out.points[E[:, 1]], axis=1)
+    assert np.median(L[nose] / r[nose]) < 2.0

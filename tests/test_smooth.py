@@ -764,3 +764,39 @@ def test_ldl_reuses_the_ordering_with_the_same_bits():
     assert solvers[0] is solvers[1] is solvers[2]                     # one ordering for the pattern
     other = sparse.triu((sparse.eye(n) * 2.0).tocsr(), format="csc")
     assert ldl.factor(other.indptr, other.indices, other.data) is not solvers[0]
+
+
+def _fragile_layout(seed):
+    """The bundled wing's layout with its nine ribs jittered by up to 0.03 of the span and the
+    front spar between 0.12 and 0.2 of the chord (the layouts of issue 41's 20 seeds)."""
+    from shellmesh_mdao.geometry import naca_wing_layout
+    rng = np.random.default_rng(seed)
+    lay = naca_wing_layout()
+    w = lay["wings"][0]
+    eta = np.linspace(0, 1, 9)
+    eta[1:-1] += rng.uniform(-0.03, 0.03, 7)
+    w["ribs"] = {"eta": [float(e) for e in eta]}
+    w["spars"] = {"chord_fractions": [float(rng.uniform(0.12, 0.2)), 0.65]}
+    return lay
+
+
+def test_smoothing_turns_no_face_across_a_leading_edge():
+    """The bundled wing at size 0.1, layout seed 2 of issue 41: the leading-edge nose (16-32 mm
+    radius) lies under faces of about the remesh edge (0.2). The smoothing's edges aim at that
+    length, so it dragged the nose's nodes aft until faces stood across the nose, from the lower
+    to the upper skin (normals along the span); the subdivision's midpoints of those faces lay
+    inside the wing and the final mesh kept a skin node 0.06 off the input. No step may now turn
+    a face further than 60 degrees from the support normal at every one of its corners (nor
+    further where it was already)."""
+    from shellmesh_mdao.core.supports import support_normals
+    from shellmesh_mdao.geometry import naca_wing
+    from shellmesh_mdao.pipeline import run_pipeline, run_stage
+    from shellmesh_mdao.smooth.elements import face_normals, facing
+    from shellmesh_mdao.smooth.qp import COS_STAND
+    st = run_pipeline(naca_wing(), _fragile_layout(2), 0.1, until="merge", progress=False).state
+    out = run_stage(st, "smooth")
+    sup, F, tri = st.supports, st.mesh.faces, st.mesh.is_tri
+    before = facing(F, face_normals(st.mesh.points, F, tri), support_normals(sup, st.mesh.points, np.arange(sup.n)))
+    after = facing(F, face_normals(out.mesh.points, F, tri), support_normals(sup, out.mesh.points, np.arange(sup.n)))
+    assert ((after > COS_STAND) | (after >= before - 1e-12)).all()
+    assert out.report["smooth"]["iterations"] > 0

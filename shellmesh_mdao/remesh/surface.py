@@ -13,9 +13,21 @@ from ..errors import MeshValidationError
 from .kernels import edge_lengths, group_order
 from ..mesh import ShellMesh, bbox_diagonal, dot_norm_rows, dot_rows, dot_unit_rows
 from ..core.locator import SurfaceLocator, closest_point_on_triangles
+from ..core.sizefield import SizeField
 from .common import CHAIN, CORNER, EdgeTable, tri_normals
 
-__all__ = ["InputSurface", "project_compatible"]
+__all__ = ["InputSurface", "project_compatible", "MAX_TURN", "TURN_MIN_EDGE_FRACTION"]
+
+#: the sizing's turning bound: where the chordal-deviation bound would let an edge turn more than
+#: 90 degrees (a fold of radius below 0.32 target edges: a leading-edge nose), no edge spans more
+#: than this many degrees of the surface's turning (edge length <= MAX_TURN / curvature), so no
+#: face cuts across the fold
+MAX_TURN = 45.0
+
+#: the turning bound stops at this fraction of ``min_edge`` (the other sizing terms stop at
+#: ``min_edge``): the bundled wing's 16 mm nose radius at its tip is resolved up to a target edge
+#: of about 0.5 (size 0.25)
+TURN_MIN_EDGE_FRACTION = 0.25
 
 # einsum's dot, its norm and unit rows (mesh.dot_rows & co.: compiled for (k, 3) rows)
 _dot, _norm, _unit = dot_rows, dot_norm_rows, dot_unit_rows
@@ -65,6 +77,7 @@ class InputSurface:
         self.edge_dihedral = np.where(inner & ~degen, dihedral, 0.0)
         self.f0, self.f1 = f0, f1
         self.delta = float(delta)
+        self.feature_angle = float(feature_angle)
         self.w_cut = 2.0 * self.delta
         isfeat = sharp | border
         # ------------------------------------------------------------ thin patches
@@ -106,6 +119,7 @@ class InputSurface:
         self.h = np.full(nv, self.target)
         self.h_min = self.target
         self.field = None
+        self.turn_field = None
 
     # ------------------------------------------------------------------ patches
     def _patches(self, isfeat):
@@ -434,6 +448,29 @@ class InputSurface:
         with np.errstate(divide="ignore"):
             hs = np.where(kappa > 0, np.sqrt(8.0 * delta / kappa), np.inf)
         h = np.minimum(h, hs)
+        # (2b) turning: the chord bound holds the deviation, but across a fold of radius
+        #      r < 2 delta (a leading-edge nose) every chord deviates by less than delta, and
+        #      where it lets an edge turn by more than 90 degrees (r < 8 delta / (pi / 2)^2, 0.32
+        #      target edges) edges cut across the fold. There no edge spans more than MAX_TURN
+        #      of the turning: l <= MAX_TURN r, down to h_turn_min (below h_min; _turning_size).
+        #      Only folds that run along a line ask, and only the smooth surface's turning counts
+        #      (edges up to the feature angle); within a target edge of a sharper edge that the
+        #      thin-feature rules dropped (a tip wedge, the creases of a faceted fin) the remesh
+        #      cuts across on purpose and this bound asks nothing. Also evaluated where each
+        #      remesh vertex is, as a size field (:meth:`field_at`): graded from where it asks,
+        #      however coarse the input triangles.
+        h_turn_min = TURN_MIN_EDGE_FRACTION * h_min
+        smooth_e = theta <= np.radians(self.feature_angle)
+        h_turn = _turning_size(P, E[sel[smooth_e]], theta[smooth_e], h_turn_min, target, delta,
+                               max(MAX_TURN, 1.5 * self.feature_angle))
+        dropped = sel[~smooth_e]
+        if len(dropped):
+            near = cKDTree(P[np.unique(E[dropped])]).query(P, distance_upper_bound=target)[0]
+            h_turn[np.isfinite(near)] = np.inf
+        h_turn = np.maximum(h_turn, h_turn_min)
+        ask = np.flatnonzero(h_turn < target)
+        self.turn_field = (SizeField(P[ask], h_turn[ask], max(gradation, 1e-6))
+                           if len(ask) else None)
         # (3) chains: turning of the polyline at its interior vertices
         if self.n_chains:
             cv, cS = self.ch_v, self.ch_S
@@ -468,17 +505,21 @@ class InputSurface:
         self.field = field
         if field is not None:
             h = np.minimum(h, field.at(P, target))
-        h = np.clip(h, h_min, target)
+        h = np.minimum(np.clip(h, h_min, target), h_turn)
         # (8) gradation: h_i <= h_j + gradation * |x_i - x_j|  (multi-source Dijkstra)
         self.h = _grade(P, E, h, gradation)
         self.h_min = h_min
 
     def field_at(self, x):
-        """The size field at points ``x`` (m, 3), between ``h_min`` and the target (the target
-        without a field)."""
-        if self.field is None:
-            return np.full(len(x), self.target)
-        return np.maximum(self.field.at(x, self.target), self.h_min)
+        """The size fields at points ``x`` (m, 3): the one given to :meth:`set_sizing` (members
+        closer than the element size; not below ``h_min``) and the turning bound's (not below
+        ``TURN_MIN_EDGE_FRACTION * h_min``), at most the target."""
+        out = np.full(len(x), self.target)
+        if self.field is not None:
+            out = np.maximum(self.field.at(x, self.target), self.h_min)
+        if self.turn_field is not None:
+            out = np.minimum(out, self.turn_field.at(x, self.target))
+        return out
 
     def shrink_sizing(self, verts, hnew, gradation):
         h = self.h.copy()
@@ -597,6 +638,120 @@ def _voxel_ratio(P, num, den, rho):
                 tn[hit] += sn[pos[hit]]
                 td[hit] += sd[pos[hit]]
     return tn[inv] / np.maximum(td[inv], np.pi * rho * rho)
+
+
+def _turning_size(P, E, theta, h_floor, target, delta, trigger):
+    """Longest edge at every input point P spanning at most :data:`MAX_TURN` degrees of the
+    surface's turning, where the chord bound would let an edge turn more than 90 degrees; inf
+    where nothing asks.
+
+    The turning ``theta`` (radians) of the input edges ``E`` times their length, spread along
+    them (samples a quarter of the radius apart, summed per cube of that size: where the input
+    is tessellated does not matter), is summed over a ball of radius ``R`` around the point;
+    over the ball's diameter it is the turning ``t`` across the ball: a fold's turning where the
+    point lies on the fold, whichever way it runs (about 0.7 of it, the ball's mean chord, where
+    the fold is as wide as the ball); a lone kink's own angle; ``pi k R / 2`` over a curvature
+    ``k``. At the radii ``R = h_floor / 2, h_floor, ...`` up to ``target``, where that ball and the
+    twice and four times larger ones turn by more than ``trigger`` degrees (above the feature
+    angle: never a lone kink), the turning in the ball four times larger runs along a line (a
+    fold running on, like a leading edge: not the point of a dome, a spinner or a tail cone,
+    nor a tip, whose turning also fades over the larger balls) and the curvature ``t / 2R`` is
+    one the chord bound would let an edge turn more than 90 degrees over, the edge asked for is
+    ``2 R MAX_TURN / t``: about ``r MAX_TURN`` across a fold of radius ``r`` at the smallest such
+    ball (``t`` is about 0.7 of the fold's turning there, the ball's mean chord over its
+    diameter: edges of about 1.1 r), the larger ones ask for no less. From the largest ball
+    down, each radius looks only at the points the two above it found turning (a fold turns
+    the larger balls no less), at one point per cube of a quarter of the radius (its point of
+    most turning, the first of equals)."""
+    out = np.full(len(P), np.inf)
+    if not len(E):
+        return out
+    ea, ed = P[E[:, 0]], P[E[:, 1]] - P[E[:, 0]]
+    L = _norm(ed)
+    emid = ea + 0.5 * ed
+    lo = P.min(0)
+    vmass = np.bincount(E.reshape(-1), weights=np.repeat(theta * L, 2), minlength=len(P))
+    trig = np.radians(trigger)
+    kmin = (0.5 * np.pi) ** 2 / (8.0 * delta)           # the chord bound's edge turns 90 degrees
+    radii = [0.5 * h_floor]
+    while radii[-1] < 4.0 * target:
+        radii.append(2.0 * radii[-1])
+    above = [np.ones(len(P), bool), np.ones(len(P), bool)]    # turning at the two radii above
+    lines = [np.zeros(len(P), bool), np.zeros(len(P), bool)]  # along a line there
+    for R in radii[::-1]:
+        cand = np.flatnonzero(above[0] & above[1])
+        hit = np.zeros(len(P), bool)
+        lined = np.zeros(len(P), bool)
+        if len(cand):
+            key = _cube_ids(P[cand], lo, 0.25 * R)
+            o = np.lexsort((cand, -vmass[cand], key))
+            firsto = np.ones(len(o), bool)
+            firsto[1:] = key[o][1:] != key[o][:-1]
+            inv = np.empty(len(cand), np.int64)
+            inv[o] = np.cumsum(firsto) - 1
+            Q = P[cand[o[firsto]]]
+            de = cKDTree(Q).query(emid, distance_upper_bound=R + 0.5 * L.max())[0]
+            e = np.flatnonzero(de <= R + 0.5 * L)
+            turn = np.zeros(len(Q))
+            if len(e):
+                X, w = _edge_samples(ea[e], ed[e], theta[e] * L[e], 0.25 * R)
+                sid = _cube_ids(X, lo, 0.25 * R)
+                ws = np.bincount(sid, weights=w)
+                Xs = np.stack([np.bincount(sid, weights=w * X[:, c]) for c in range(3)], 1)
+                used = ws > 0
+                ws, Xs = ws[used], Xs[used] / ws[used, None]
+                pairs = cKDTree(Q).sparse_distance_matrix(cKDTree(Xs), R, output_type="ndarray")
+                turn = np.bincount(pairs["i"], weights=ws[pairs["j"]], minlength=len(Q)) / (2.0 * R)
+                line = _elongated(Q, Xs, ws, pairs["i"], pairs["j"])
+            else:
+                line = np.zeros(len(Q), bool)
+            turn, line = turn[inv], line[inv]
+            on = turn > trig
+            hit[cand[on]] = True
+            lined[cand[line]] = True
+            ask = on & lines[0][cand] & (turn > 2.0 * R * kmin) & (R <= target)
+            out[cand[ask]] = np.minimum(out[cand[ask]], 2.0 * R * np.radians(MAX_TURN) / turn[ask])
+        above = [above[1], hit]
+        lines = [lines[1], lined]
+    return out
+
+
+def _elongated(Q, X, w, i, j):
+    """Per ball (centre ``Q[i]``): whether the weights ``w[j]`` at ``X[j]`` in it run along a line,
+    their spread along their principal axis at least twice that across it (a fold running
+    through the ball, not the point of a dome or a cone)."""
+    n = len(Q)
+    m = np.maximum(np.bincount(i, weights=w[j], minlength=n), 1e-300)
+    x = X[j] - Q[i]
+    mu = np.stack([np.bincount(i, weights=w[j] * x[:, c], minlength=n) for c in range(3)], 1) / m[:, None]
+    S = np.empty((n, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            S[:, a, b] = S[:, b, a] = (np.bincount(i, weights=w[j] * x[:, a] * x[:, b], minlength=n) / m
+                                       - mu[:, a] * mu[:, b])
+    lam = np.linalg.eigvalsh(S)
+    return lam[:, 2] >= 4.0 * np.maximum(lam[:, 1], 0.0)
+
+
+def _cube_ids(X, lo, a):
+    """Per point of ``X``: the number of the cube of edge ``a`` (a lattice from ``lo``) it lies
+    in, numbered 0, 1, ... in lexicographic order of the cubes."""
+    k = np.floor((X - lo) / a).astype(np.int64)
+    o = np.lexsort((k[:, 2], k[:, 1], k[:, 0]))
+    new = np.ones(len(o), bool)
+    new[1:] = (k[o][1:] != k[o][:-1]).any(1)
+    ids = np.empty(len(o), np.int64)
+    ids[o] = np.cumsum(new) - 1
+    return ids
+
+
+def _edge_samples(a, d, w, step):
+    """Points every about ``step`` along the segments ``a + t d`` and their shares of ``w``."""
+    L = _norm(d)
+    k = np.maximum(np.ceil(L / step).astype(np.int64), 1)
+    owner = np.repeat(np.arange(len(a)), k)
+    t = (np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k) + 0.5) / k[owner]
+    return a[owner] + t[:, None] * d[owner], (w / k)[owner]
 
 
 def _edge_size(theta, w, delta):

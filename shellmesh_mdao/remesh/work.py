@@ -154,8 +154,8 @@ class Context:
             h[c] = hc
         q = k == CORNER
         h[q] = s.h[W.vin[idx[q]]]
-        if s.field is not None:                  # the local sizes asked for, where the vertex is
-            h = np.minimum(h, s.field_at(W.P[idx]))
+        if s.field is not None or s.turn_field is not None:     # the local sizes asked for, where
+            h = np.minimum(h, s.field_at(W.P[idx]))                 # the vertex is
         return h
 
     def chain_S_of(self, W, v, c, near):

@@ -30,7 +30,9 @@ fold (scaled Jacobian, measured against the element's own normal and against its
 before the step, at or below ``min_jacobian`` and lower than before) and of every vertex
 whose projection jumps (landing farther from the tangent-plane point than the move, or
 finding no input triangle facing the vertex's way nearby, e.g. only the opposite skin of
-a thin trailing edge).
+a thin trailing edge), and of every element the step would turn across its supports (further
+than :data:`~.qp.STAND_ANGLE` from the support normal at every corner, and further than
+before: a face dragged across a leading-edge nose tighter than itself).
 
 Modules: :mod:`.qp` (the trust-region steps of :func:`smooth`; :func:`smooth_mesh`, the
 pipeline's smooth stage), :mod:`.energy` (the energies and

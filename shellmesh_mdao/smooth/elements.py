@@ -11,7 +11,7 @@ from ..core.supports import PLANE, Supports
 from .kernels import element_normals, face_quality, min_corner_sj
 from ..mesh import ShellMesh, cross_rows, dot_unit_rows, norm_rows
 
-__all__ = ["face_normals", "element_min_sj", "oriented_quality", "draped_vertices", "tangent_basis",
+__all__ = ["face_normals", "facing", "element_min_sj", "oriented_quality", "draped_vertices", "tangent_basis",
            "mesh_figures"]
 
 _TRI_SJ = 2.0 / math.sqrt(3.0)
@@ -45,6 +45,17 @@ def _corner_normals(c, is_tri):
         ct = c[is_tri]
         v[is_tri] = cross_rows(ct[:, 1] - ct[:, 0], ct[:, 2] - ct[:, 0])
     return _unit(v)
+
+
+def facing(faces, nface, nsup):
+    """Per element: the largest dot product of its unit normal ``nface`` (m, 3) with the support
+    normals ``nsup`` (n, 3) of its corners (zero rows: no support normal, not counted); +inf for
+    an element none of whose corners has one."""
+    fv = np.where(faces >= 0, faces, faces[:, :1])
+    ns = nsup[fv]                                                   # (m, 4, 3)
+    has = np.einsum("mij,mij->mi", ns, ns) > 0.5
+    d = np.where(has, np.einsum("mij,mj->mi", ns, nface), -np.inf).max(1)
+    return np.where(has.any(1), d, np.inf)
 
 
 def element_min_sj(P, faces, is_tri, nref=None):

@@ -16,7 +16,7 @@ from ..errors import MeshValidationError
 from .kernels import ReducedHessian, nearest_other_distance, pair_difference
 from ..mesh import ShellMesh, dot_norm_rows, dot_unit_rows, edge_topology, vertex_faces
 from ..options import SmoothOptions
-from .elements import element_min_sj, face_normals, mesh_figures
+from .elements import element_min_sj, face_normals, facing, mesh_figures
 from .energy import OrthoTerm, WarpTerm, energy_pairs, tangent_frames, vertex_normals_and_curvature
 from .linear import LDL, LinearSolver, solve_kkt
 
@@ -28,6 +28,12 @@ __all__ = ["AUTO_LU_MAX_UNKNOWNS", "SmoothResult", "smooth", "smooth_report", "s
 #: (5.7k nodes), 41 against 42 ms on a 715-node wing; a factorisation's fill-in grows fast on
 #: surface meshes (splu: 0.25 s at 20k unknowns, 2.7 s at 51k).
 AUTO_LU_MAX_UNKNOWNS = 0
+
+#: the line search's facing guard: no step may leave a face turned further than this from the
+#: support normal (input facet, member plane) at every one of its corners, unless it was already
+#: and the step turns it no further
+STAND_ANGLE = 60.0
+COS_STAND = float(np.cos(np.radians(STAND_ANGLE)))
 
 # einsum's norm and unit rows (mesh.dot_norm_rows & co.: compiled for (k, 3) rows)
 _norm, _unit = dot_norm_rows, dot_unit_rows
@@ -43,8 +49,10 @@ class SmoothResult:
     ``moves``             largest move of each step;
     ``n_step_halvings``   vertex-step halvings done by the fold / jump line search;
     ``n_rejected``        vertex steps finally set to zero by the line search;
-    ``n_fold_hits``, ``n_jump_hits``: line-search hits by cause (a vertex of an element that
-                          would fold; a projection that jumped or found no compatible triangle);
+    ``n_fold_hits``, ``n_jump_hits``, ``n_stand_hits``: line-search hits by cause (a vertex of an
+                          element that would fold; a projection that jumped or found no
+                          compatible triangle; an element the step would turn across its
+                          supports, :data:`STAND_ANGLE`);
     ``quality_before``, ``quality_after``: :func:`mesh_figures` of input and output.
     """
 
@@ -56,6 +64,7 @@ class SmoothResult:
     factorisations: int = 0
     n_fold_hits: int = 0
     n_jump_hits: int = 0
+    n_stand_hits: int = 0
     moves: list = field(default_factory=list)
     quality_before: dict = field(default_factory=dict)
     quality_after: dict = field(default_factory=dict)
@@ -194,10 +203,13 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
     method = solver
     if solver == "auto":
         method = "lu" if int(dof.sum()) <= AUTO_LU_MAX_UNKNOWNS else "cg"
-    moves, halvings, rejected, nfact, n_jump, n_fold = [], 0, 0, 0, 0, 0
+    moves, halvings, rejected, nfact, n_jump, n_fold, n_stand = [], 0, 0, 0, 0, 0, 0
     # each vertex's closest input triangle at its last projection: where the next query starts
     hint = np.full(n, -1, np.int64)
     lin = T = nrm = ortho = warpt = hess = None
+    # each vertex's support normal (closest input facet, member plane; zero on curves and FIXED)
+    # at its current position: the facing guard of the line search
+    snrm = support_normals(supports, P, np.arange(n)) if len(movable) else np.zeros((n, 3))
     ldl = LDL()                     # the refreshed matrices share one pattern: one ordering
     it = 0
     for it in range(1, iterations + 1):
@@ -279,6 +291,9 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
         sj_old[fsel] = element_min_sj(P, faces[fsel], is_tri[fsel], nref)
         nref_all = np.zeros((len(faces), 3))
         nref_all[fsel] = nref
+        face_old = np.full(len(faces), np.inf)
+        face_old[fsel] = facing(faces[fsel], nref, snrm)
+        sn_new = snrm.copy()
         alpha = np.zeros(n)
         alpha[todo] = 1.0
         X = P.copy()
@@ -296,9 +311,17 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
                 X[live] = x
                 badv = live[~ok | jump]
                 n_jump += len(badv)
+                sn_new[live] = support_normals(supports, X, live)
+            sn_new[todo[alpha[todo] == 0]] = snrm[todo[alpha[todo] == 0]]
             fs = faces_of(vptr, vface, todo, len(faces))
             sj_new = element_min_sj(X, faces[fs], is_tri[fs], nref_all[fs])
             badf = fs[(~np.isfinite(sj_new) | (sj_new <= min_jacobian)) & (sj_new < sj_old[fs] - 1e-12)]
+            # no step may turn a face across its support (further than STAND_ANGLE from the
+            # support normal at every corner), nor further across where it stood so before
+            f_new = facing(faces[fs], face_normals(X, faces[fs], is_tri[fs]), sn_new)
+            stand = fs[(f_new <= COS_STAND) & (f_new < face_old[fs] - 1e-12)]
+            n_stand += len(stand)
+            badf = np.union1d(badf, stand)
             fv = faces[badf]
             fv = fv[fv >= 0]
             hit = np.zeros(n, bool)
@@ -319,12 +342,13 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
         move = float(_norm(X - P).max()) if n else 0.0
         moves.append(move)
         P = X
+        snrm = sn_new
         if move < tol * scale:
             break
     out = mesh.with_points(P)
     res = SmoothResult(iterations=it, seconds=time.perf_counter() - t0, max_move=max(moves, default=0.0),
                        n_step_halvings=halvings, n_rejected=rejected, factorisations=nfact, moves=moves,
-                       n_fold_hits=n_fold, n_jump_hits=n_jump, quality_before=before,
+                       n_fold_hits=n_fold, n_jump_hits=n_jump, n_stand_hits=n_stand, quality_before=before,
                        quality_after=mesh_figures(out, supports, target_edge) if figures in ("both", "after") else {})
     return out, res
 
