@@ -260,7 +260,9 @@ def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
     nodes of the faces within two rings of the quads that move left above the goal (it flattens
     the others without the pass), and the report counts those quads (warp_term.seed_quads). The
     pass starts from the trial's mesh with those nodes back where they were before the move;
-    the move after it moves only those nodes, so every other node keeps the trial's position."""
+    the move after it moves only those nodes, so every other node keeps the trial's position;
+    its report counts the quads warped before every move it counts (the trial's that stand too)
+    and after."""
     import shellmesh_mdao.quad.finish as F
     from shellmesh_mdao.mesh import vertex_faces
 
@@ -316,6 +318,13 @@ def test_warp_pass_is_centred_on_the_quads_planarize_left_warped(monkeypatch):
     assert np.array_equal(out[~inside], tm.points[~inside]) and not np.array_equal(out[inside], after.points[inside])
     assert np.array_equal(done["before_planar"].points[~inside], trial["before_planar"].points[~inside])
     assert np.array_equal(done["before_planar"].points[inside], after.points[inside])
+    # its figures: before every move it counts (the guarantee compares them), after in the result
+    bq = done["before_planar"]
+    wb, wa = (element_quality(m.points, m.faces)["warp"][m.faces[:, 3] >= 0] for m in (bq, done["mesh"]))
+    rep = done["planar"]
+    assert rep["moved"] == int((np.linalg.norm(out - bq.points, axis=1) > 0).sum())
+    assert rep["quads_above_before"] == int((wb > 5.0).sum()) and rep["quads_above_after"] == int((wa > 5.0).sum())
+    assert rep["warp_p99_before"] == pytest.approx(np.percentile(wb, 99))
     if wt["kept"] == "pass":
         assert res.mesh.points.tobytes() == out.tobytes()
 

@@ -209,7 +209,8 @@ def finish_region(q: ShellMesh, sup, size: float, movable, trial: dict,
     region the trial's move stands; the smoothing put the region's nodes on their supports, and
     the trial settled the rest). ``before_planar``: the nodes that kept the trial's positions at
     the trial's positions before its move. The same keys as :func:`finish_quads`; ``planar``'s
-    ``moved`` and ``max_offset`` count the trial's moves that stand as well, and ``repair`` is
+    ``moved`` and ``max_offset`` count the trial's moves that stand as well, its
+    ``quads_above_before`` and ``warp_p99_before`` are measured on ``before_planar``, and ``repair`` is
     the trial's where the region needed none. ``options``: the quad stage's
     :class:`~shellmesh_mdao.options.QuadOptions` (``planar_offset``, ``warp_goal``)."""
     q, sj, poor, repair = _repair_poor(q, sup, scaled_jacobian(q.points, q.faces))
@@ -224,8 +225,14 @@ def finish_region(q: ShellMesh, sup, size: float, movable, trial: dict,
     # trial's that stand outside it ("nodes": the region's candidates and those)
     step = norm_rows(q.points - bp, axis=1)
     kept_out = int((step[held] > 0).sum())
+    # and its "before" figures are those of the mesh before every move it counts (the trial's moves
+    # that stand flattened quads outside the region: measured after them, a region whose quads no
+    # move can flatten would report the trial's moves as flattening nothing)
+    wb = warp(bp, q.faces)
     planar.update(applied=bool(planar["applied"] or kept_out), nodes=int(planar["nodes"]) + kept_out,
-                  moved=int((step > 0).sum()), max_offset=float(step.max(initial=0.0)))
+                  moved=int((step > 0).sum()), max_offset=float(step.max(initial=0.0)),
+                  quads_above_before=int((~q.is_tri & (wb > options.warp_goal)).sum()),
+                  warp_p99_before=_warp_p99(q, wb))
     planar.update(max_offset_over_size=planar["max_offset"] / size)
     # the trial's repair stands too (the pass started from its mesh)
     return {"mesh": q, "sj": sj, "poor": poor, "repair": trial["repair"] if repair is None else repair,
