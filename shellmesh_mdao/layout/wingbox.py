@@ -48,10 +48,12 @@ is that sharp at some station the wing gets two **edge webs**, ``<wing>/le_web``
 such chord fraction over the span; at least an element size from the edge and the spar, else
 midway between them), and the ribs run between them; ``StationWing.notes`` and
 the report say so. The webs' place is the tool's choice, so it is one where a web is at least
-:data:`MIN_WEB_HEIGHT` element sizes tall from the root to the tip station: where that one is
-lower, the web moves to the nearest chord fraction of its side of the box that is tall enough
-(:func:`_web_fractions`); where none is, the wing is too thin to carry a box at that size and the
-error says so (its largest thickness there and the element size that would do).
+:data:`EDGE_WEB_HEIGHT` element sizes tall from the root to the tip station (where the remesh keeps
+the upper and lower skin apart): where that one is lower, the web moves to the nearest chord
+fraction of its side of the box that is tall enough, else to the nearest at least
+:data:`MIN_WEB_HEIGHT` sizes tall (:func:`_web_fractions`); where none is, the wing is too thin to
+carry a box at that size and the error says so (its largest thickness there and the element size
+that would do).
 
 **Checks before meshing** (:class:`~shellmesh_mdao.errors.LayoutError` naming the member and
 the fix): a wing with members whose root and tip stations are closer than
@@ -76,12 +78,18 @@ from .planform import Planform, measure_planform
 from .schema import MIN_MEMBER_GAP, Layout, MemberSpec, coincident_parts
 from .stations import StationWing
 
-__all__ = ["resolve_layout", "resolve_station_wing", "PlanformLine", "MIN_WEB_HEIGHT", "MIN_EDGE_ANGLE",
+__all__ = ["resolve_layout", "resolve_station_wing", "PlanformLine", "MIN_WEB_HEIGHT", "EDGE_WEB_HEIGHT", "MIN_EDGE_ANGLE",
            "MIN_BASE", "SPAR_TOL", "PLANFORM_TOL", "TURN_NOTE", "WEB_GAP"]
 
 #: a spar or web must be at least this many element sizes tall (the project stage's rule for
 #: corner-given spars, ``project.MIN_MEMBER_HEIGHT``; the layout stage cannot import it)
 MIN_WEB_HEIGHT = 0.3
+#: an edge web stands where the wing is at least this many element sizes tall wherever the wing has
+#: room for that: the remesh cuts across a skin thinner than twice its chordal deviation (0.4 sizes
+#: by default, as at a blunt edge's base: :data:`MIN_BASE`) with faces running from the upper to the
+#: lower skin, and a web's curves imprinted into those faces leave slivers or break; where no place is
+#: that tall, :data:`MIN_WEB_HEIGHT` is the limit
+EDGE_WEB_HEIGHT = 0.4
 #: an edge sharper than this cannot be the corner of a full-chord rib: a quad in a corner of
 #: angle a has a scaled Jacobian of at most sin(a), and the pipeline guarantees above 0.2, so
 #: 11.5 deg; half as much again for the measurement (one element size from the edge)
@@ -371,11 +379,12 @@ def _web_fractions(pf: Planform, spars, size: float, name: str, edge: str) -> tu
     message). Preferred: where the wing is half its largest thickness, the most aft (front web)
     and most forward (rear web) over the span, at least an element size from the edges (at the
     smallest chord) and from the spar; midway between the edge and the spar where there is no
-    room for that. A web must be :data:`MIN_WEB_HEIGHT` element sizes tall over the whole span
+    room for that. A web must be :data:`EDGE_WEB_HEIGHT` element sizes tall over the whole span
     (strictly between the root and tip stations, as :func:`_spar_height` checks it), with
     :data:`SPAR_TOL` sizes to spare for its straightening: where the preferred fraction is lower
     than that, the web moves to the nearest fraction of its side of the box that is tall enough
-    (an element size from the spar and the edges, else :data:`WEB_GAP` sizes). Where none is,
+    (an element size from the spar and the edges, else :data:`WEB_GAP` sizes), else to the
+    nearest at least :data:`MIN_WEB_HEIGHT` sizes tall (the same way). Where none is,
     the wing cannot carry a box at this size: a LayoutError names the wing, its thickness and the
     element size that would do."""
     c = np.linspace(0.0, 1.0, 401)
@@ -403,10 +412,19 @@ def _web_fractions(pf: Planform, spars, size: float, name: str, edge: str) -> tu
 
     def room(a, b, hh, pref):
         """The fraction nearest ``pref`` between ``a`` and ``b`` (0 the leading edge, 1 the
-        trailing edge, else a spar or web) where a web is tall enough at element size ``hh``:
-        an element size from both ends, else :data:`WEB_GAP` sizes from a member; None."""
+        trailing edge, else a spar or web) where a web is tall enough at element size ``hh``
+        (:data:`EDGE_WEB_HEIGHT` sizes, else :data:`MIN_WEB_HEIGHT`): an element size from both
+        ends, else :data:`WEB_GAP` sizes from a member; None."""
+        for need in (EDGE_WEB_HEIGHT, MIN_WEB_HEIGHT):
+            got = room_of(a, b, hh, pref, need)
+            if got is not None:
+                return got
+        return None
+
+    def room_of(a, b, hh, pref, need):
+        """:func:`room` for webs at least ``need`` element sizes tall."""
         d = int(np.ceil(SPAR_TOL * hh / cmin / (c[1] - c[0])))
-        tall = minimum_filter1d(H, 2 * d + 1, mode="nearest") >= MIN_WEB_HEIGHT * hh
+        tall = minimum_filter1d(H, 2 * d + 1, mode="nearest") >= need * hh
         if pref is not None and a < pref < b and tall[int(np.argmin(np.abs(c - pref)))]:
             return pref
         for gap in (hh / cmin, WEB_GAP * hh / cmin):
