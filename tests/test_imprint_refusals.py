@@ -141,16 +141,25 @@ def test_straight_wing_full_chord_ribs_refused_alike_at_every_size(geometry_dir,
 
 @pytest.mark.slow
 def test_rib_whose_section_leaves_its_skin_side_is_refused_clearly(geometry_dir, manifest):
-    """straight_wing, 10 ribs, spars 0.15/0.65, size 0.04875: the root rib's upper section on the
-    working skin crossed to the lower side near its forward spar end (0.017 tall there); the
-    fallback cut was kept anyway and the lower chain then failed as 'broken into pieces'. Now the
-    upper chain is refused, naming the rib, its ends and the place; at 0.04333 it meshes (~5 s)."""
+    """swept_wing, the layout of stress seed 17 (17 ribs, the last at the tip station, eta 1; spars
+    at 0.381, 0.586 and 0.746), size 0.0175: the tip rib's rear end lies within an element of the
+    end of the skin, where a face of the working skin spans both sides of the wing, and the rib's
+    lower section crosses to the upper side there. A cut kept anyway would break the next curve
+    into pieces; the imprint refuses that chain, naming the rib, its ends and the place, and says
+    to move the member away from the end. Moved inboard (eta 0.96), the layout meshes (~8 s).
+    (The straight wing's root rib at 0.04875 did the same near its forward spar end, across the
+    thin leading edge, until the remesh's turning bound resolved that nose.)"""
     from shellmesh_mdao.layout import layout_from_manifest
     from shellmesh_mdao.pipeline import run_pipeline
-    lay = layout_from_manifest(manifest, "straight_wing", ribs=10, spars=[0.15, 0.65])
-    with pytest.raises(ImprintError, match=r"wing/rib_0 \(upper\): its curve on the skin does not run between its "
-                                           r"ends \[-0\.1, -1\.95, .*\] and \[-0\.6, -1\.95, .*\]: it leaves that "
-                                           r"skin side near .*move the member away"):
-        run_pipeline(geometry_dir / "straight_wing.stl", lay, 0.04875, until="imprint", progress=False)
-    res = run_pipeline(geometry_dir / "straight_wing.stl", lay, 0.04333, until="members", progress=False)
+    ribs = [0.0, 0.0242, 0.0493, 0.0835, 0.1353, 0.2107, 0.2399, 0.311, 0.4668, 0.4932, 0.585, 0.6048, 0.6494,
+            0.6724, 0.8456, 0.9791, 1.0]
+    spars = [0.381, 0.586, 0.746]
+    stl = geometry_dir / "swept_wing.stl"
+    lay = layout_from_manifest(manifest, "swept_wing", ribs=ribs, spars=spars)
+    with pytest.raises(ImprintError, match=r"wing/rib_16 \(lower\): its curve on the skin does not run between its "
+                                           r"ends \[1\.5261, -1\.15462, .*\] and \[1\.43536, -1\.24538, .*\]: it "
+                                           r"leaves that skin side near .*move the member away from that end"):
+        run_pipeline(stl, lay, 0.0175, until="imprint", progress=False)
+    moved = layout_from_manifest(manifest, "swept_wing", ribs=ribs[:-2] + [0.96], spars=spars)
+    res = run_pipeline(stl, moved, 0.0175, until="members", progress=False)
     assert res.stage == "members"
