@@ -101,14 +101,15 @@ def junction_misses(mesh, chains, tol):
 
 
 def test_imprint_redoes_a_cut_that_misses_its_crossing(geometry_dir, manifest):
-    """swept_wing layout of stress seed 139 (ribs at 0.1/0.18/0.62/0.72/0.94, spars at 0.12 and 0.36 of
-    the chord, size 0.0312), with the solver option ``snap`` at 0.4. At that snap distance the cut of
-    left_wing/spar_1's lower chain snaps a vertex beside its end crossing (the wing is thin there) and
-    ends one vertex off it; the imprint finds the crossing missing and redoes that one cut at
-    ``SNAP_FALLBACK`` (0.25); with the fallback switched off, the last resort (a cut without snapping)
-    keeps the crossing."""
+    """swept_wing layout of stress seed 87 (12 ribs from eta 0 to 1, spars at 0.383, 0.526 and 0.771
+    of the chord, size 0.04148), with the solver option ``snap`` at 0.4. At that snap distance the
+    cut of right_wing/spar_0's lower chain snaps a vertex beside its end crossing and ends one vertex
+    off it; the imprint finds the crossing missing and redoes that one cut at ``SNAP_FALLBACK``
+    (0.25); with the fallback switched off, the last resort (a cut without snapping) keeps the
+    crossing. (Stress seed 139's left_wing/spar_1 did the same until the remesh's turning bound
+    changed its skin.)"""
     from shellmesh_mdao.benchmarks import stress as SL
-    case = SL.draw_case(139, "swept_wing", manifest=manifest, geometry_dir=geometry_dir)
+    case = SL.draw_case(87, "swept_wing", manifest=manifest, geometry_dir=geometry_dir)
     lay = layout_from_manifest(manifest, "swept_wing", ribs=list(case["ribs"]), spars=list(case["spars"]))
     opts = {"snap": 0.4}
     st = run_pipeline(geometry_dir / manifest["geometries"]["swept_wing"]["file"], lay, case["size"],
@@ -119,16 +120,16 @@ def test_imprint_redoes_a_cut_that_misses_its_crossing(geometry_dir, manifest):
     # crossing, and the last resort, a cut without snapping, keeps it: every junction is shared
     mesh, chains = imprint_chains(st.mesh, P, T, st.specs, snap=0.4, snap_fallback=0.4, locator=st.locator)
     assert junction_misses(mesh, chains, tol) == []
-    assert [(c.member, c.side, c.snap) for c in chains if c.snap != 0.4] == [("left_wing/spar_1", "lower", 0.0)]
+    assert [(c.member, c.side, c.snap) for c in chains if c.snap != 0.4] == [("right_wing/spar_0", "lower", 0.0)]
     # as the pipeline runs it: that one chain is cut again at 0.25, every junction is shared
     mesh, chains = imprint_chains(st.mesh, P, T, st.specs, snap=0.4, locator=st.locator)
     assert junction_misses(mesh, chains, tol) == []
-    assert [(c.member, c.side) for c in chains if c.snap != 0.4] == [("left_wing/spar_1", "lower")]
+    assert [(c.member, c.side) for c in chains if c.snap != 0.4] == [("right_wing/spar_0", "lower")]
     assert all(c.snap in (0.4, SNAP_FALLBACK) for c in chains)
     # and the whole run meshes it: members conform at every junction (the members stage checks)
     r = run_pipeline(geometry_dir / manifest["geometries"]["swept_wing"]["file"], lay, case["size"],
                      until="members", progress=False, options=opts)
-    snaps = {c["side"]: c["snap"] for c in r.report["members"]["left_wing/spar_1"]["chains"]}
+    snaps = {c["side"]: c["snap"] for c in r.report["members"]["right_wing/spar_0"]["chains"]}
     assert snaps == {"upper": 0.4, "lower": SNAP_FALLBACK}
 
 
