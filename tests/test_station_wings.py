@@ -258,6 +258,30 @@ def test_crank_kinks_the_spars(wing):
         assert pf.chord_fraction_at(t, pf.x_of(p)) == pytest.approx(0.65, abs=0.01)
 
 
+def test_spars_kink_at_ribs_that_crowd_a_crank():
+    """Ribs within an element size of every station near a crank (none left for the kink): the
+    spars kink where the nearest ribs on each side of the crank meet them, and stay on their
+    chord fractions (the kink was dropped and a spar ran 1.6 sizes off its fraction, an edge web
+    out of the wing: random-family seed 3)."""
+    S = naca_wing(crank=(0.4, 1.3), sweep_deg=20.0)
+    ribs_at = (2.26, 2.42, 2.56)
+    eta = [0.0, 0.2] + [(t - 0.2) / 5.6 for t in ribs_at] + [0.7, 1.0]
+    lay = resolve(S, layout(cranks=[2.4], ribs={"eta": eta, "orientation": "streamwise"}))
+    pf = lay.station_wings[0].planform
+    for j, frac in enumerate((0.15, 0.65)):
+        pieces = sorted((m for m in lay.members() if m.name.startswith(f"w/spar_{j}/part_")),
+                        key=lambda m: m.start @ pf.axis)
+        kinks = [m.end @ pf.axis for m in pieces[:-1]]
+        assert kinks[0] == pytest.approx(2.26, abs=1e-9) and kinks[1] == pytest.approx(2.42, abs=1e-9)
+        for m in pieces:
+            for s in np.linspace(0.0, 1.0, 41):
+                p = m.start + s * (m.end - m.start)
+                t = p @ pf.axis
+                c = pf.chord_fraction_at(t, pf.x_of(p))
+                off = abs(c - frac) * float(pf.chord(np.array([t]))[0])
+                assert off <= SPAR_TOL * SIZE + 1e-9, (m.name, t, off)
+
+
 def test_fewer_than_two_spars(wing):
     """Full-chord ribs where both edges are round or blunt; edge webs at a sharp edge."""
     lay = resolve(wing, layout(spars={"chord_fractions": [0.35]}, ribs={"count": 4}))

@@ -220,13 +220,31 @@ class _Box:
         if len(J):
             allowed = np.abs(ts[:, None] - J[None, :]).min(axis=1) >= m
         allowed &= (ts - ts[0] >= 2 * m) & (ts[-1] - ts >= 2 * m)
-        keep = []
+        xs = np.asarray(xs, float)
+        keep, at, kept = [], [], []
+        inner = J[(J >= ts[0] + 2 * m) & (J <= ts[-1] - 2 * m)] if len(J) else J
         for c in self.cranks:
             ok = np.flatnonzero(allowed)
-            if len(ok):
-                k = int(ok[np.argmin(np.abs(ts[ok] - c))])
-                if abs(ts[k] - c) <= 2 * m:
-                    keep.append(k)
+            k = int(ok[np.argmin(np.abs(ts[ok] - c))]) if len(ok) else -1
+            if k >= 0 and abs(ts[k] - c) <= 2 * m:
+                keep.append(k)
+            elif len(inner):
+                # ribs within a size of every station near the crank: the line may kink where those
+                # ribs meet it (a kink at a junction leaves no short piece), and does at the nearest
+                # on each side of the crank
+                near = inner[np.abs(inner - c) <= 2 * m]
+                at += [float(j) for j in near]
+                kept += [float(near[near <= c].max())] if np.any(near <= c) else []
+                kept += [float(near[near > c].min())] if np.any(near > c) else []
+        if at:
+            at = np.unique(at)
+            ts = np.concatenate([ts, at])
+            xs = np.concatenate([xs, np.interp(at, self.ts, xs)])
+            allowed = np.concatenate([allowed, np.ones(len(at), bool)])
+            o = np.argsort(ts, kind="stable")
+            ts, xs, allowed = ts[o], xs[o], allowed[o]
+            new = np.flatnonzero(o >= len(o) - len(at))
+            keep = [int(np.flatnonzero(o == i)[0]) for i in keep] + [int(i) for i in new if ts[i] in kept]
         idx = _simplify(ts, xs, SPAR_TOL * m, keep, allowed, 2 * m)
         return PlanformLine(ts[idx], xs[idx])
 
