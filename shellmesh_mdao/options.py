@@ -153,8 +153,9 @@ class SmoothOptions:
     ``smooth_iterations`` trust-region steps of the smoothing QP before subdivision (default 10).
     ``smooth_jacobian``   no smoothing step before subdivision may bring an element to or below
                           this scaled Jacobian (nor lower one already below it).
-    ``smooth_energy``     energy of both smoothing passes: ``"squared"`` (default: edges aim at the
-                          target length, twice ``size`` before subdivision, ``size`` after) or
+    ``smooth_energy``     energy of both smoothing passes: ``"squared"`` (default: each edge aims at
+                          the local size at its ends, the mean length of the edges at a vertex,
+                          at most twice ``size`` before subdivision, ``size`` after) or
                           ``"length"`` (sum of edge lengths, scale-free: the paper's words); see
                           :func:`~shellmesh_mdao.smooth.smooth` and docs/optimisation.md.
     ``smooth_warp_weight`` the quad planarity term (``warp_weight`` of

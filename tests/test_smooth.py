@@ -800,3 +800,26 @@ def test_smoothing_turns_no_face_across_a_leading_edge():
     after = facing(F, face_normals(out.mesh.points, F, tri), support_normals(sup, out.mesh.points, np.arange(sup.n)))
     assert ((after > COS_STAND) | (after >= before - 1e-12)).all()
     assert out.report["smooth"]["iterations"] > 0
+
+
+def test_smooth_stage_keeps_the_leading_edge_grading():
+    """Issue 41: the remesh grades the bundled wing's skin finer at the leading-edge nose (edges of
+    0.03-0.06 under a 0.2 remesh edge at size 0.1). With every edge aiming at the one remesh edge
+    length the smoothing stretched the nose's edges up to 2.05 times (a tenth of them by more than
+    1.5), spreading each face over more of the nose, and their children came out long, thin and
+    warped. Each edge now aims at the local size at its ends (local_edge_size)."""
+    from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
+    from shellmesh_mdao.pipeline import run_pipeline, run_stage
+    from shellmesh_mdao.smooth import local_edge_size
+    st = run_pipeline(naca_wing(), naca_wing_layout(), 0.1, until="merge", progress=False).state
+    h = local_edge_size(st.mesh, 0.2)
+    assert h.max() <= 0.2 and np.median(h) < 0.15             # graded: most of the mesh below the target
+    out = run_stage(st, "smooth")
+    E = st.mesh.edges()
+    mid = st.mesh.points[E].mean(1)
+    y = mid[:, 1]
+    # the nose at mid-span (bundled wing: chord 2 - y/6, leading edge swept 10 degrees)
+    nose = (y > 0.5) & (y < 5.0) & (mid[:, 0] - y * np.tan(np.radians(10.0)) < 0.03 * (2.0 - y / 6.0))
+    r = out.mesh.edge_lengths()[nose] / st.mesh.edge_lengths()[nose]
+    assert nose.sum() > 300
+    assert np.percentile(r, 90) < 1.25 and r.max() < 1.6

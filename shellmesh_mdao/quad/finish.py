@@ -14,7 +14,7 @@ from ..core.topology import face_rings
 from ..mesh import ShellMesh, norm_rows, vertex_faces
 from ..options import QuadOptions, SmoothOptions
 from ..quality import scaled_jacobian, warp
-from ..smooth import mesh_figures, smooth, smooth_report, untangle
+from ..smooth import local_edge_size, mesh_figures, smooth, smooth_report, untangle
 from .planar import planarize
 from .subdivide import settle_off_surface, subdivide_to_quads
 
@@ -72,9 +72,12 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, options: QuadOpt
     warp_term = None
     done = None
     if o.final_iterations:
+        # both passes aim each edge at the local size of the subdivided mesh at its ends (at most
+        # size): the grading of the remesh and the smooth stage stays
+        hs = local_edge_size(q, size)
         # the first pass's figures after it are taken only if no second pass follows
         q, res = smooth(q, sup, iterations=o.final_iterations, energy=so.smooth_energy, target_edge=size,
-                        ortho_weight=o.final_ortho_weight, refresh=o.final_refresh, warp_weight=0.0,
+                        edge_size=hs, ortho_weight=o.final_ortho_weight, refresh=o.final_refresh, warp_weight=0.0,
                         min_jacobian=FINAL_MIN_JACOBIAN, figures="before")
         # the planarity term trades scaled Jacobian for flatness: a second pass with it, only
         # where the warp p99 acceptance is missed and the planarize move alone cannot meet it
@@ -117,7 +120,7 @@ def quad_mesh(mesh: ShellMesh, supports: Supports, size: float, options: QuadOpt
                 q = q.with_points(start)
             # every quad above warp_from in the term (warp_spread 180: none left out)
             q, res2 = smooth(q, sup, iterations=o.final_warp_iterations, energy=so.smooth_energy,
-                             target_edge=size, ortho_weight=o.final_ortho_weight,
+                             target_edge=size, edge_size=hs, ortho_weight=o.final_ortho_weight,
                              warp_weight=o.final_warp_weight, warp_from=so.warp_from, warp_spread=180.0,
                              min_jacobian=FINAL_MIN_JACOBIAN, vertices=movable, figures="after")
             res = dataclasses.replace(

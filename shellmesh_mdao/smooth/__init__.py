@@ -10,8 +10,9 @@ with a quadratic energy E over the mesh edges (and optionally the quad diagonals
 ``energy="length"`` is the quadratic model of the objective the paper states in
 words, the sum of edge LENGTHS (pair weights 1/L frozen at the last refresh, so the
 gradient is the sum of unit edge vectors); ``energy="squared"`` is eq. 6/7 as printed (sum
-of squared lengths), optionally with rest lengths ``target_edge`` (the default, as the
-pipeline's option ``smooth_energy``). Beyond the paper,
+of squared lengths), optionally with rest lengths: ``target_edge``, or per vertex ``edge_size``
+(the default, as the pipeline's option ``smooth_energy``; the pipeline's passes aim each edge at
+the local size at its ends, :func:`local_edge_size`, so the remesh's grading stays). Beyond the paper,
 ``ortho_weight`` adds a quad-corner orthogonality term (zero for right angles at any
 aspect ratio). The tangent constraint ``N D = 0`` is eliminated exactly with an
 orthonormal tangent basis ``T`` (``D = T u``, null-space method): the same minimiser as the
@@ -39,11 +40,12 @@ pipeline's smooth stage), :mod:`.energy` (the energies and
 their Hessian), :mod:`.linear` (the linear solves), :mod:`.untangling` (:func:`untangle`) and
 :mod:`.elements` (element measures and :func:`mesh_figures`).
 """
+from .energy import local_edge_size
 from .elements import draped_vertices, element_min_sj, face_normals, mesh_figures, oriented_quality, tangent_basis
 from .linear import CG_RTOL, LDL, LinearSolver
 from .qp import AUTO_LU_MAX_UNKNOWNS, SmoothResult, smooth, smooth_mesh, smooth_report
 from .untangling import untangle
 
-__all__ = ["smooth", "smooth_mesh", "SmoothResult", "smooth_report", "untangle", "mesh_figures",
+__all__ = ["smooth", "smooth_mesh", "local_edge_size", "SmoothResult", "smooth_report", "untangle", "mesh_figures",
            "AUTO_LU_MAX_UNKNOWNS", "CG_RTOL", "LDL", "LinearSolver", "face_normals", "element_min_sj", "oriented_quality", "draped_vertices",
            "tangent_basis"]

@@ -14,10 +14,27 @@ from ..mesh import ShellMesh, cross_rows, dot_norm_rows, dot_rows, dot_unit_rows
 from ..quality import warp
 from .elements import draped_vertices, tangent_basis
 
-__all__ = ["energy_pairs", "tangent_frames", "vertex_normals_and_curvature", "OrthoTerm", "WarpTerm"]
+__all__ = ["local_edge_size", "energy_pairs", "tangent_frames", "vertex_normals_and_curvature", "OrthoTerm", "WarpTerm"]
 
 # einsum's dot, its norm and unit rows (mesh.dot_rows & co.: compiled for (k, 3) rows)
 _dot, _norm, _unit = dot_rows, dot_norm_rows, dot_unit_rows
+
+
+def local_edge_size(mesh: ShellMesh, cap: float) -> np.ndarray:
+    """Each vertex's local element size in ``mesh``: the mean length of the edges at it, at most
+    ``cap`` (``cap`` at a vertex without edges). The squared energy's rest lengths
+    (:func:`~shellmesh_mdao.smooth.smooth`'s ``edge_size``): the smoothing keeps the grading the
+    remesh made (a leading-edge nose, a fold, members closer than the element size) instead of
+    pulling every edge towards the one flat-region length."""
+    n = mesh.n_points
+    E = mesh.edges()
+    if not len(E):
+        return np.full(n, float(cap))
+    L = mesh.edge_lengths()
+    total = np.bincount(E.ravel(), np.repeat(L, 2), n)
+    count = np.bincount(E.ravel(), minlength=n)
+    h = np.divide(total, count, out=np.full(n, float(cap)), where=count > 0)
+    return np.minimum(h, float(cap))
 
 
 def energy_pairs(E, faces, is_tri, diagonal_weight: float):

@@ -17,7 +17,8 @@ from .kernels import ReducedHessian, nearest_other_distance, pair_difference
 from ..mesh import ShellMesh, dot_norm_rows, dot_unit_rows, edge_topology, vertex_faces
 from ..options import SmoothOptions
 from .elements import element_min_sj, face_normals, facing, mesh_figures
-from .energy import OrthoTerm, WarpTerm, energy_pairs, tangent_frames, vertex_normals_and_curvature
+from .energy import (OrthoTerm, WarpTerm, energy_pairs, local_edge_size, tangent_frames,
+                     vertex_normals_and_curvature)
 from .linear import LDL, LinearSolver, solve_kkt
 
 __all__ = ["AUTO_LU_MAX_UNKNOWNS", "SmoothResult", "smooth", "smooth_report", "smooth_mesh"]
@@ -79,7 +80,8 @@ def smooth_report(res) -> dict:
 
 
 def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptions.smooth_iterations,
-           energy: str = SmoothOptions.smooth_energy, target_edge: float | None = None, diagonal_weight: float = 0.0,
+           energy: str = SmoothOptions.smooth_energy, target_edge: float | None = None, edge_size=None,
+           diagonal_weight: float = 0.0,
            ortho_weight: float = 1.0, warp_weight: float = SmoothOptions.smooth_warp_weight,
            warp_from: float = SmoothOptions.warp_from, warp_spread: float = SmoothOptions.smooth_warp_spread,
            vertices=None, trust: float = 0.3, reg: float = 0.25, curvature_weight: float = 10.0, refresh: int = 4,
@@ -105,9 +107,12 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
         (equilibrium: balanced edge directions, scale-free, keeps size gradation);
         ``"squared"`` (the default): eq. 6/7 as printed, sum of squared lengths (uniform
         Laplacian).
-    target_edge : with ``energy="squared"``: each edge aims at this length and each quad
-        diagonal at sqrt(2) times it (rest vectors along the current directions). With
-        either energy it is the ``size`` of the reported ``median_edge_ratio``.
+    target_edge : with ``energy="squared"`` and no ``edge_size``: each edge aims at this length
+        and each quad diagonal at sqrt(2) times it (rest vectors along the current directions).
+        With either energy it is the ``size`` of the reported ``median_edge_ratio``.
+    edge_size : with ``energy="squared"``: (n,) local sizes, one per mesh vertex
+        (:func:`~.energy.local_edge_size`); each edge aims at the mean of its two ends' sizes
+        (each quad diagonal at sqrt(2) times that of its ends) instead of ``target_edge``.
     diagonal_weight : weight of the quad-diagonal pairs relative to the edges (0 = edges
         only, as in the paper).
     ortho_weight : weight of the quad-corner orthogonality term (beyond the paper; see
@@ -173,6 +178,10 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
     if target_edge is not None and not (np.isfinite(target_edge) and target_edge > 0):
         from ..errors import SizeError
         raise SizeError(f"target_edge must be a positive length, got {target_edge}")
+    if edge_size is not None:
+        edge_size = np.asarray(edge_size, np.float64).reshape(-1)
+        if len(edge_size) != mesh.n_points or not (np.isfinite(edge_size).all() and (edge_size > 0).all()):
+            raise ValueError(f"edge_size must hold one positive length per mesh vertex ({mesh.n_points})")
     if vertices is not None:
         vertices = np.asarray(vertices, np.int64).reshape(-1)
         if len(vertices) and (vertices.min() < 0 or vertices.max() >= mesh.n_points):
@@ -199,6 +208,14 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
         E = edge_topology(faces).edges
     pairs, pw0, pf = energy_pairs(E, faces, is_tri, diagonal_weight)
     i, j = pairs[:, 0], pairs[:, 1]
+    # each pair's rest length (edges; the diagonals sqrt 2 times it): the mean of its ends' local
+    # sizes, or target_edge
+    rest = None
+    if energy == "squared":
+        if edge_size is not None:
+            rest = 0.5 * (edge_size[i] + edge_size[j])
+        elif target_edge is not None:
+            rest = float(target_edge)
     has_quads = not is_tri.all()
     method = solver
     if solver == "auto":
@@ -270,8 +287,8 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
             g = (K @ xc).ravel() + ortho_weight * ortho.gradient(xc, n).ravel()
         if warpt is not None:
             g = g + warp_weight * warpt.gradient(xc, n).ravel()
-        if target_edge is not None and energy == "squared":
-            rv = (target_edge * pf)[:, None] * _unit(P[i] - P[j])
+        if rest is not None:
+            rv = (rest * pf)[:, None] * _unit(P[i] - P[j])
             g = g - pair_difference(i, j, pw, rv, n).ravel()      # the rest vectors' pull, per vertex
         if method == "kkt":
             D = solve_kkt(K3, rho_v, n, g, supports, T, owner)
@@ -356,7 +373,9 @@ def smooth(mesh: ShellMesh, supports: Supports, *, iterations: int = SmoothOptio
 def smooth_mesh(mesh: ShellMesh, supports: Supports, target_edge: float,
                 options: SmoothOptions = SmoothOptions()) -> tuple[ShellMesh, dict]:
     """The pipeline's smooth stage: :func:`smooth` on the whole merged mesh before subdivision,
-    edges aiming at ``target_edge`` (the remesh edge length) with the ``"squared"`` energy, with
+    each edge aiming (``"squared"`` energy) at the local size of the merged mesh at its ends
+    (:func:`~.energy.local_edge_size`: the mean length of the edges at a vertex, at most
+    ``target_edge``, the remesh edge length), so that the grading the remesh made stays, with
     the stage's :class:`~shellmesh_mdao.options.SmoothOptions` (``smooth_iterations`` steps, no
     step bringing an element to or below ``smooth_jacobian``, energy ``smooth_energy``, the quad
     planarity term ``smooth_warp_weight`` above ``warp_from`` degrees, leaving out the quads by
@@ -367,7 +386,11 @@ def smooth_mesh(mesh: ShellMesh, supports: Supports, target_edge: float,
     o = options
     # a triangle's scaled Jacobian bounds its three child quads' after subdivision: keep every
     # element above smooth_jacobian (0.4: triangle angles >= ~20 deg, children above ~0.3)
+    # each edge aims at the local size, not at target_edge everywhere: pulling the small elements
+    # of a graded region (a leading-edge nose) towards the flat-region length spread them over
+    # the nose, and their children came out long, thin and warped
     out, res = smooth(mesh, supports, iterations=o.smooth_iterations, min_jacobian=o.smooth_jacobian,
-                      energy=o.smooth_energy, target_edge=target_edge, warp_weight=o.smooth_warp_weight,
+                      energy=o.smooth_energy, target_edge=target_edge,
+                      edge_size=local_edge_size(mesh, target_edge), warp_weight=o.smooth_warp_weight,
                       warp_from=o.warp_from, warp_spread=o.smooth_warp_spread)
     return out, smooth_report(res)
