@@ -617,25 +617,25 @@ def test_smooth_round_keeps_tip_cap_outline_vertices_off_the_skin_beside_them():
     triangles around it: the imprint smoothing must not carry it onto the skin beside it, which
     would leave its cap triangles standing across the crease (issue 41: quads folded 68-88
     degrees over the default wing's tip and root trailing-edge corners). Smoothing every vertex
-    of the input wing, no triangle ends up more than 60 degrees off the input normal at its
-    centroid (before the guard: 26 triangles, up to 172 degrees)."""
+    of the input wing, no triangle ends up standing more than MAX_STAND (45) degrees off the
+    input surface (the same smoothing without the rule leaves triangles standing up to 90)."""
     from shellmesh_mdao.imprint.improve import _smooth_round
+    from shellmesh_mdao.imprint.common import MAX_STAND, standing
     from shellmesh_mdao.core.locator import SurfaceLocator
 
     m = naca_wing(n_chord=30, n_span=25)
     loc = SurfaceLocator(m.points, m.faces[:, :3])
-    P = m.points.copy()
     T = m.faces[:, :3]
-    moved = 0
-    for _ in range(6):
-        with np.errstate(invalid="ignore"):              # as improve_skin runs it
-            P, k = _smooth_round(P, T, np.ones(len(P), bool), loc)
-        moved += k
-    assert moved > 100                                   # the smoothing still works
-    X = P[T]
-    fn = np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0])
-    _, tri, _ = loc.closest(X.mean(axis=1))
-    Q = loc.points[loc.triangles[tri]]
-    sn = np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
-    cos = np.einsum("ij,ij->i", fn, sn) / (np.linalg.norm(fn, axis=1) * np.linalg.norm(sn, axis=1))
-    assert (cos >= np.cos(np.radians(60.0))).all(), np.degrees(np.arccos(np.clip(cos.min(), -1, 1)))
+    assert standing(m.points[T], loc).max() < 1.0        # the input lies on itself
+    worst = {}
+    for max_stand in (MAX_STAND, 90.0):                  # 90: the rule never refuses
+        P = m.points.copy()
+        moved = 0
+        for _ in range(6):
+            with np.errstate(invalid="ignore"):          # as improve_skin runs it
+                P, k = _smooth_round(P, T, np.ones(len(P), bool), loc, max_stand=max_stand)
+            moved += k
+        assert moved > 100                               # the smoothing still works
+        worst[max_stand] = standing(P[T], loc).max()
+    assert worst[MAX_STAND] <= MAX_STAND, worst
+    assert worst[90.0] > 60.0, worst

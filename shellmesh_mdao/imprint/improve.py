@@ -10,7 +10,7 @@ from ..core.polyline import SCAN_WORK, pick_segments
 from ..core.kernels import edge_lookup, edge_rows, edge_table, segments_scan
 from .kernels import skin_flips, star_independent, star_moves
 from ..mesh import ShellMesh, cross_rows, norm_rows, vertex_faces
-from .common import min_angle_from_cos, min_angles_small, ranges, tri_angles_min
+from .common import MAX_STAND, min_angle_from_cos, min_angles_small, ranges, stands_up, tri_angles_min
 from .repair import CHAIN, FREE, SkinPatch, skin_roles
 
 __all__ = ["improve_skin", "flip_round"]
@@ -140,54 +140,22 @@ def flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0, active=None)
     return T, len(take)
 
 
-def _stands_off(rows, tris, T, P, new, land, locator, max_stand):
-    """For each triangle ``tris[i]`` of the star of vertex ``rows[i]``, that vertex moved to
-    ``new``: whether the triangle's normal is more than ``max_stand`` degrees from the normal of
-    the input triangle ``land[rows[i]]`` the vertex lands on (False where ``land`` is -1: a chain
-    vertex, which lands on its arc)."""
-    out = np.zeros(len(rows), bool)
-    on = np.flatnonzero(land[rows] >= 0)
-    if not len(on):
-        return out
-    r, t = rows[on], T[tris[on]]
-    X = P[t]
-    X[t == r[:, None]] = new[r]
-    fn = cross_rows(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0])
-    Q = locator.points[locator.triangles[land[r]]]
-    sn = cross_rows(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
-    cos = np.einsum("ij,ij->i", fn, sn) / np.maximum(norm_rows(fn, axis=1) * norm_rows(sn, axis=1), 1e-300)
-    out[on] = cos < np.cos(np.radians(max_stand))
-    return out
-
-
-def _standing(X, locator):
-    """Degrees between the normal of each triangle ``X`` (k, 3, 3) and the input's normal at the
-    input point closest to its centroid."""
-    fn = cross_rows(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0])
-    _, tri, _ = locator.closest(X.mean(axis=1))
-    Q = locator.points[locator.triangles[tri]]
-    sn = cross_rows(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
-    cos = np.einsum("ij,ij->i", fn, sn) / np.maximum(norm_rows(fn, axis=1) * norm_rows(sn, axis=1), 1e-300)
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-
-
 def _stands_up(v, ptr, star, T, P, new, locator, max_stand):
     """For each vertex ``v`` moved alone from ``P`` to ``new``: whether a triangle of its star
-    (``ptr``, ``star``: :func:`vertex_faces`) would stand more than ``max_stand`` degrees off the
-    input's normal at its centroid (:func:`_standing`) and more than it does now."""
+    (``ptr``, ``star``: :func:`vertex_faces`) would break the standing rule (:func:`stands_up`)."""
     rows = np.repeat(v, np.diff(ptr)[v])
     tris = star[ranges(ptr[v], ptr[v + 1])]
     X0 = P[T[tris]]
     X1 = X0.copy()
     X1[T[tris] == rows[:, None]] = new[rows]
-    bad = _standing(X1, locator) > np.maximum(_standing(X0, locator), max_stand) + 1e-9
+    bad = stands_up(X0, X1, locator, max_stand)
     out = np.zeros(len(P), bool)
     out[rows[bad]] = True
     return out[v]
 
 
 def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, chain_nb=None, hint=None,
-                  max_stand=60.0):
+                  max_stand=MAX_STAND):
     """Move each movable vertex towards the area-weighted centroid of its star (tangential,
     then onto the input surface); chain vertices (``chain_of[v] >= 0``) move the same way,
     projected onto their exact arc. A move is kept only if it raises the smallest angle of
@@ -195,16 +163,12 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     next vertex along its chain, -1 for none) keeps the vertex between its chain neighbours
     along the arc: where the skin is thinner than its faces the closest arc point can be on
     the far side of the section, and the chain would run back and forth there (a spike).
-    A vertex moved onto the input surface must also leave every triangle of its star within
-    ``max_stand`` degrees of the normal of the input triangle it lands on (:func:`_stands_off`).
-    Across a sharp input edge that is no feature line (the remesh drops the outline of a tip
-    cap thinner than its deviation near a sharp trailing edge) a vertex of the cap's outline
-    would otherwise be carried onto the skin beside it, its cap triangles then standing across
-    the crease (and the quads merged and subdivided from them folded over it). Nor may a move
-    leave a triangle of the star standing more than ``max_stand`` degrees off the input's normal
-    at its centroid, and more than before (:func:`_stands_up`): a vertex of a root cap's outline,
-    the cap thinner there than the skin triangles beside it, carried far onto the skin would
-    stretch its cap triangles through the wing at a slant within ``max_stand`` of that skin.
+    Nor may a move leave a triangle of the star standing up off the input surface
+    (:func:`~.common.stands_up` with ``max_stand``, the rule the local repair keeps too): across
+    a sharp input edge that is no feature line (the remesh drops the outline of a tip cap thinner
+    than its deviation near a sharp trailing edge) a vertex of the cap's outline would otherwise
+    be carried onto the skin beside it, its cap triangles then standing across the crease (and
+    the quads merged and subdivided from them folded over it).
     Moves are applied on an independent set (no two moved vertices share a triangle).
     ``hint`` (n,): an input triangle near each vertex (-1: none) for the projections, updated in
     place with the triangles they found (a hint saves a part of the search; the answers are
@@ -235,10 +199,8 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     mv -= np.einsum("ij,ij->i", mv, vn[cand])[:, None] * vn[cand]
     new[cand] = P[cand] + step * mv
     surf = cand if chain_of is None else cand[chain_of[cand] < 0]
-    land = np.full(n, -1, np.int64)                 # the input triangle each free vertex lands on
     if len(surf):
         new[surf], tri, _ = locator.closest(new[surf], hint=None if hint is None else hint[surf])
-        land[surf] = tri
         if hint is not None:
             hint[surf] = tri
     if chain_of is not None:
@@ -254,7 +216,6 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     starts = np.concatenate([[0], np.cumsum(np.diff(ptr)[cand])[:-1]])
     worst_new = np.full(n, np.inf)
     worst_old = np.full(n, np.inf)
-    flip |= _stands_off(rows, tris, T, P, new, land, locator, max_stand)
     worst_new[cand] = np.minimum.reduceat(np.where(flip, -1.0, ang_new), starts)
     worst_old[cand] = np.minimum.reduceat(ang_old, starts)
     ok = cand[worst_new[cand] > worst_old[cand] + 1e-9]
