@@ -609,3 +609,33 @@ def test_smooth_round_hint_gives_the_same_moves_and_records_the_triangles():
         _, tri, _ = loc.closest(hinted[moved])
         assert np.array_equal(tri, hint[moved])
         P = hinted
+
+
+def test_smooth_round_keeps_tip_cap_outline_vertices_off_the_skin_beside_them():
+    """A vertex of a tip cap's outline (a sharp edge; the remesh drops it as a feature line where
+    the cap is thinner than its deviation, near a sharp trailing edge) has cap triangles and skin
+    triangles around it: the imprint smoothing must not carry it onto the skin beside it, which
+    would leave its cap triangles standing across the crease (issue 41: quads folded 68-88
+    degrees over the default wing's tip and root trailing-edge corners). Smoothing every vertex
+    of the input wing, no triangle ends up standing more than MAX_STAND (45) degrees off the
+    input surface (the same smoothing without the rule leaves triangles standing up to 90)."""
+    from shellmesh_mdao.imprint.improve import _smooth_round
+    from shellmesh_mdao.imprint.common import MAX_STAND, standing
+    from shellmesh_mdao.core.locator import SurfaceLocator
+
+    m = naca_wing(n_chord=30, n_span=25)
+    loc = SurfaceLocator(m.points, m.faces[:, :3])
+    T = m.faces[:, :3]
+    assert standing(m.points[T], loc).max() < 1.0        # the input lies on itself
+    worst = {}
+    for max_stand in (MAX_STAND, 90.0):                  # 90: the rule never refuses
+        P = m.points.copy()
+        moved = 0
+        for _ in range(6):
+            with np.errstate(invalid="ignore"):          # as improve_skin runs it
+                P, k = _smooth_round(P, T, np.ones(len(P), bool), loc, max_stand=max_stand)
+            moved += k
+        assert moved > 100                               # the smoothing still works
+        worst[max_stand] = standing(P[T], loc).max()
+    assert worst[MAX_STAND] <= MAX_STAND, worst
+    assert worst[90.0] > 60.0, worst

@@ -11,6 +11,7 @@ skin node lies on the input surface and no element has a scaled Jacobian <= 0.2.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from shellmesh_mdao import pipeline as pl
 from shellmesh_mdao.benchmarks import stress as SL
@@ -43,3 +44,26 @@ def test_straight_wing_seed58_tip_caps_on_surface(geometry_dir, manifest):
     assert tip.sum() > 100
     assert scaled_jacobian(q.points, q.faces).min() > 0.2
     assert res.report["poor_elements"]["count"] == 0
+
+
+@pytest.mark.parametrize("size", [0.05, 0.1])
+def test_default_wing_quads_not_folded_over_trailing_edge_corners(size):
+    """Issue 41: on the bundled wing (flat tip cap, sharp trailing edge) skin quads at the tip's
+    trailing-edge corner were warped 68-88 degrees and one at the root's 88: folded over the
+    crease where the cap's outline meets the trailing edge (the imprint smoothing, at size 0.05
+    its local repair, had carried a cap-outline vertex onto the skin beside it). No skin quad
+    within three element sizes of either trailing-edge corner is warped more than 30 degrees."""
+    from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
+    from shellmesh_mdao.quality import element_quality
+
+    res = pl.run_pipeline(naca_wing(), naca_wing_layout(), size, progress=False, check=False)
+    m = res.mesh
+    skin = np.array(m.component_names)[m.component] == "skin"
+    c = m.points[m.faces].mean(axis=1)
+    warp = element_quality(m.points, m.faces)["warp"]
+    # the trailing edge's ends: root chord 2 at y = 0; tip chord 1 at y = 6, 10 deg sweep, 3 deg dihedral
+    tip = [6.0 * np.tan(np.radians(10.0)) + 1.0, 6.0, 6.0 * np.tan(np.radians(3.0))]
+    for corner in ([2.0, 0.0, 0.0], tip):
+        near = skin & (np.linalg.norm(c - np.array(corner), axis=1) < 3.0 * size)
+        assert near.sum() > 20
+        assert warp[near].max() <= 30.0, (corner, float(warp[near].max()))

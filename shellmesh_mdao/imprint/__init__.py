@@ -36,7 +36,8 @@ sections of the input triangulation, :class:`Plane` and :class:`SectionArc`, are
 * :mod:`.bridges`   skin edges between two vertices of one member's chains (:func:`split_member_bridges`);
 * :mod:`.families`  the bay families of the skin (:func:`skin_families`);
 * :mod:`.stage`     the stage's cut and chain finishing in order (:func:`imprint_mesh`);
-* :mod:`.common`    small helpers the modules share (triangle angles, index ranges, edge keys).
+* :mod:`.common`    small helpers the modules share (triangle angles, index ranges, edge keys, the standing
+                    rule of the moves of skin vertices).
 """
 from __future__ import annotations
 

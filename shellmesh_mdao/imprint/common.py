@@ -1,5 +1,6 @@
 """Small helpers the imprint's modules share: triangle angles and normals, concatenated index
-ranges, edge keys, and arc-length parameters of points on a short polyline."""
+ranges, edge keys, arc-length parameters of points on a short polyline, and the standing rule of
+every step that moves skin vertices (:func:`stands_up`)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,7 +9,15 @@ from .kernels import corner_cosines
 from ..mesh import norm_rows
 
 __all__ = ["tri_angles_min", "angles3", "min_angle_from_cos", "min_angles_small", "unit_normals", "ranges",
-           "edge_keys", "has_edge", "polyline_param"]
+           "edge_keys", "has_edge", "polyline_param", "MAX_STAND", "MIN_RISE", "standing", "stands_up"]
+
+# the standing rule of the moves of skin vertices (:func:`stands_up`): no triangle may come to stand
+# more than MAX_STAND degrees off the input surface (closer to across it than along it), having
+# risen by more than MIN_RISE degrees (a vertex carried across a crease turns its triangles by
+# tens of degrees; a move within a ridge tighter than the element size -- a leading edge, a tail
+# cone at a coarse size -- turns the triangles already standing across it by a few)
+MAX_STAND = 45.0
+MIN_RISE = 20.0
 
 
 def tri_angles_min(P, T):
@@ -90,3 +99,32 @@ def polyline_param(q, poly, cum):
         j = np.argmin(dist, axis=1)
         out[s:s + 256] = cum[j] + t[np.arange(len(qq)), j] * np.sqrt(L2[j])
     return out
+
+
+def standing(X, locator):
+    """Degrees (0 to 90) by which each triangle given by its corners ``X`` (t, 3, 3) stands off
+    the input surface: the largest angle between its plane and the input's tangent plane at the
+    input points closest to its centroid and to a point near each corner, inside it (a corner on
+    a sharp edge has two tangent planes; the point beside it, one). Unsigned: a sliver along a
+    thin sharp edge (a trailing edge) has a point about as close to the surface's far side as
+    to its own, and a turned-over triangle is another check's."""
+    fn = unit_normals(X)
+    W = np.array([[1.0, 1.0, 1.0], [4.0, 1.0, 1.0], [1.0, 4.0, 1.0], [1.0, 1.0, 4.0]]) / np.array([[3.0], [6.0], [6.0], [6.0]])
+    Y = np.einsum("sk,tkj->tsj", W, X)                              # (t, 4, 3) sample points
+    _, tri, _ = locator.closest(Y.reshape(-1, 3))
+    sn = unit_normals(locator.points[locator.triangles[tri]]).reshape(len(X), 4, 3)
+    cos = np.abs(np.einsum("tsj,tj->ts", sn, fn)).min(axis=1)
+    return np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+
+
+def stands_up(X0, X1, locator, max_stand=MAX_STAND):
+    """The standing rule of every step that moves skin vertices (the imprint's smoothing rounds
+    and its local repair): True where triangle ``X1`` (t, 3, 3), triangle ``X0`` after a move of
+    its corners, stands more than ``max_stand`` degrees off the input surface (:func:`standing`),
+    more than :data:`MIN_RISE` degrees further than it did. Across a sharp input edge that is no
+    feature line (the remesh drops the outline of a tip cap thinner than its deviation near a
+    sharp trailing edge) a vertex of the cap's outline moved onto the skin beside it leaves its
+    cap triangles standing across the crease; the quads merged and subdivided from them fold
+    over it."""
+    after = standing(X1, locator)
+    return (after > max_stand) & (after > standing(X0, locator) + MIN_RISE)

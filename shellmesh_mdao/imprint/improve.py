@@ -10,7 +10,7 @@ from ..core.polyline import SCAN_WORK, pick_segments
 from ..core.kernels import edge_lookup, edge_rows, edge_table, segments_scan
 from .kernels import skin_flips, star_independent, star_moves
 from ..mesh import ShellMesh, cross_rows, norm_rows, vertex_faces
-from .common import min_angle_from_cos, min_angles_small, ranges, tri_angles_min
+from .common import MAX_STAND, min_angle_from_cos, min_angles_small, ranges, stands_up, tri_angles_min
 from .repair import CHAIN, FREE, SkinPatch, skin_roles
 
 __all__ = ["improve_skin", "flip_round"]
@@ -140,7 +140,22 @@ def flip_round(P, T, locked_edges, max_dihedral=35.0, min_gain=1.0, active=None)
     return T, len(take)
 
 
-def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, chain_nb=None, hint=None):
+def _stands_up(v, ptr, star, T, P, new, locator, max_stand):
+    """For each vertex ``v`` moved alone from ``P`` to ``new``: whether a triangle of its star
+    (``ptr``, ``star``: :func:`vertex_faces`) would break the standing rule (:func:`stands_up`)."""
+    rows = np.repeat(v, np.diff(ptr)[v])
+    tris = star[ranges(ptr[v], ptr[v + 1])]
+    X0 = P[T[tris]]
+    X1 = X0.copy()
+    X1[T[tris] == rows[:, None]] = new[rows]
+    bad = stands_up(X0, X1, locator, max_stand)
+    out = np.zeros(len(P), bool)
+    out[rows[bad]] = True
+    return out[v]
+
+
+def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, chain_nb=None, hint=None,
+                  max_stand=MAX_STAND):
     """Move each movable vertex towards the area-weighted centroid of its star (tangential,
     then onto the input surface); chain vertices (``chain_of[v] >= 0``) move the same way,
     projected onto their exact arc. A move is kept only if it raises the smallest angle of
@@ -148,6 +163,12 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     next vertex along its chain, -1 for none) keeps the vertex between its chain neighbours
     along the arc: where the skin is thinner than its faces the closest arc point can be on
     the far side of the section, and the chain would run back and forth there (a spike).
+    Nor may a move leave a triangle of the star standing up off the input surface
+    (:func:`~.common.stands_up` with ``max_stand``, the rule the local repair keeps too): across
+    a sharp input edge that is no feature line (the remesh drops the outline of a tip cap thinner
+    than its deviation near a sharp trailing edge) a vertex of the cap's outline would otherwise
+    be carried onto the skin beside it, its cap triangles then standing across the crease (and
+    the quads merged and subdivided from them folded over it).
     Moves are applied on an independent set (no two moved vertices share a triangle).
     ``hint`` (n,): an input triangle near each vertex (-1: none) for the projections, updated in
     place with the triangles they found (a hint saves a part of the search; the answers are
@@ -200,6 +221,8 @@ def _smooth_round(P, T, movable, locator, chain_of=None, arcs=None, step=0.5, ch
     ok = cand[worst_new[cand] > worst_old[cand] + 1e-9]
     if chain_nb is not None and chain_of is not None and len(ok):
         ok = ok[_in_order_on_arc(ok, new, P, chain_of, chain_nb, arcs)]
+    if len(ok):
+        ok = ok[~_stands_up(ok, ptr, star, T, P, new, locator, max_stand)]
     if not len(ok):
         return P, 0
     # independent set: vertices sharing a triangle cannot both move (the larger gain wins, the

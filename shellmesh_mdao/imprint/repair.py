@@ -7,7 +7,7 @@ import numpy as np
 
 from ..core.polyline import closest_on_polyline, closest_on_segments
 from ..mesh import norm_rows, vertex_faces
-from .common import min_angles_small, polyline_param, unit_normals
+from .common import min_angles_small, polyline_param, stands_up, unit_normals
 from .crossings import kept_sharp_segments
 
 __all__ = ["FREE", "CHAIN", "CREASE", "FIXED", "DEAD", "skin_roles", "SkinPatch"]
@@ -247,11 +247,13 @@ class SkinPatch:
             return q, np.full(len(q), np.inf)
         return closest_on_segments(q, a, b)
 
-    def turned(self, new_tris, old_normals):
-        """True where a new triangle is degenerate or turned more than 45 degrees from the
-        normal of the face it replaces."""
-        nn = unit_normals(self.P[np.asarray(new_tris)])
-        return np.einsum("ij,ij->i", nn, old_normals) <= self.COS_TURN
+    def turned(self, new_tris, old_tris):
+        """True where a new triangle is degenerate, turned more than 45 degrees from the face
+        it replaces (``old_tris``, row for row) or standing up off the input surface where that
+        face did not (:func:`~.common.stands_up`, the rule of every move of skin vertices)."""
+        X0, X1 = self.P[np.asarray(old_tris)], self.P[np.asarray(new_tris)]
+        return (np.einsum("ij,ij->i", unit_normals(X1), unit_normals(X0)) <= self.COS_TURN) | stands_up(
+            X0, X1, self.locator)
 
     # ------------------------------------------------------------ operations
     def flip(self, a, b, min_gain):
@@ -357,7 +359,7 @@ class SkinPatch:
         keep = fv[(fv != fa) & (fv != fb)]
         new = self.T[keep].copy()
         new[new == v] = u
-        if self.turned(new, unit_normals(self.P[self.T[keep]])).any():
+        if self.turned(new, self.T[keep]).any():
             return False
         comps = self.C[keep].copy()
         for f in fv.tolist():
@@ -409,12 +411,11 @@ class SkinPatch:
             if d[1] > self.eps or d[2] > self.eps or d[0] > 0.25 * np.linalg.norm(self.P[b] - self.P[a]):
                 return False
             x, kind = xs[0], CREASE
-        nn = unit_normals(self.P[self.T[[f0, f1]]])
         self._grow()
         n = self.n
         self.P[n] = x                      # scratch slot for the check; add_point writes it again
         new = np.array([[a, n, r], [n, b, r], [b, n, s], [n, a, s]])
-        if self.turned(new, nn[[0, 0, 1, 1]]).any():
+        if self.turned(new, self.T[[f0, f0, f1, f1]]).any():
             return False
         n = self.add_point(x, kind, ci)
         c0, c1 = self.C[f0], self.C[f1]
@@ -489,7 +490,8 @@ class SkinPatch:
 
     def move(self, v, iters=4):
         """Hill-climb vertex v over its candidate positions to raise its star's smallest
-        angle (no face turning more than 45 degrees from where it started)."""
+        angle (no face turning more than 45 degrees from where it started, nor standing up off
+        the input surface: :func:`~.common.stands_up`, the smoothing rounds' rule)."""
         if self.kind[v] not in (FREE, CHAIN, CREASE):
             return False
         tri = self.T[self.faces(v)]
@@ -507,6 +509,8 @@ class SkinPatch:
             Xc = np.where(which, q[:, None, None, :], X[None]).reshape(-1, 3, 3)   # (k * f, 3, 3)
             ang = min_angles_small(Xc).reshape(len(q), len(tri))
             turn = np.einsum("kfi,fi->kf", unit_normals(Xc).reshape(len(q), len(tri), 3), n0) <= self.COS_TURN
+            turn |= stands_up(np.broadcast_to(X, Xc.reshape(len(q), len(tri), 3, 3).shape).reshape(-1, 3, 3), Xc,
+                              self.locator).reshape(len(q), len(tri))
             score = np.where(turn.any(1), -1.0, ang.min(1))
             j = int(np.argmax(score))
             if score[j] <= cur + 1e-6:
