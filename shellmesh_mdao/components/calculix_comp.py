@@ -2,9 +2,9 @@
 
 A thin wrapper of :func:`shellmesh_mdao.analysis.analyse_shell`: every ``compute`` writes the
 deck with the current per-family thicknesses, runs ``ccx`` in a temporary folder and parses
-the ``.dat`` results. Partials are finite differences (``declare_partials(method='fd')``),
-declared only for the families that have faces, so one evaluation of the partials costs
-one ccx run per non-empty family. See ``docs/analysis.md``.
+the ``.dat`` results. Partials are central finite differences (``declare_partials(method='fd')``,
+relative step ``fd_step`` = 1e-2), declared only for the families that have faces, so one
+evaluation of the partials costs two ccx runs per non-empty family. See ``docs/analysis.md``.
 
 The mesh comes either as the option ``mesh`` or, when that option is not given, as the
 discrete input ``shell_mesh`` (from a :class:`~shellmesh_mdao.components.group.ShellMeshGroup`:
@@ -59,7 +59,9 @@ class CalculixShellAnalysis(om.ExplicitComponent):
     node ids: :func:`~shellmesh_mdao.analysis.select_tip_nodes`), ``clamp_band`` (distance; default 5 %
     of the reach), ``element`` ("linear": S4/S3, "quadratic": S8R/S6),
     ``ks_rho``, ``ks_ref``, ``thickness`` (initial value), ``ccx`` (executable), ``threads``,
-    ``timeout`` (s), ``workdir`` (keep the files there), ``fd_step`` (relative FD step).
+    ``timeout`` (s), ``workdir`` (keep the files there), ``fd_step`` (relative FD step, default 1e-2)
+    and ``fd_form`` (default ``"central"``: two ccx runs per family, see ``docs/analysis.md``), ``buckling``
+    (number of buckling factors, default 0: outputs ``buckling_factors`` and ``ks_buckling``).
     """
 
     def initialize(self):
@@ -90,7 +92,9 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         o.declare("threads", default=1, types=int, desc="threads given to ccx")
         o.declare("timeout", default=None, desc="seconds before a ccx run is abandoned")
         o.declare("workdir", default=None, desc="keep deck and results in this folder (default: temporary)")
-        o.declare("fd_step", default=1e-3, types=float, desc="finite-difference step relative to each thickness")
+        o.declare("fd_step", default=1e-2, types=float, desc="finite-difference step relative to each thickness")
+        o.declare("fd_form", default="central", values=("central", "forward", "backward"),
+                  desc="finite-difference form of the thickness partials (central: 2 ccx runs per family)")
         o.declare("buckling", default=0, types=int, desc="number of lowest buckling factors (0: no *BUCKLE step)")
 
     def setup(self):
@@ -132,8 +136,8 @@ class CalculixShellAnalysis(om.ExplicitComponent):
             self.add_output("ks_buckling", val=0.0, desc="KS of 1 / buckling_factors (<= 1: no buckling)")
         # with shell_mesh the non-empty families are not known yet: partials of every family
         nz = np.flatnonzero(np.bincount(mesh.component, minlength=n) > 0) if mesh is not None else np.arange(n)
-        self._cache, self._cache_size, self._nonempty = {}, len(nz) + 2, nz   # results of recent thicknesses
-        fd = dict(method="fd", step=o["fd_step"], step_calc="rel_element", form="forward")
+        self._cache, self._cache_size, self._nonempty = {}, 2 * len(nz) + 2, nz   # results of recent thicknesses
+        fd = dict(method="fd", step=o["fd_step"], step_calc="rel_element", form=o["fd_form"])
         if nb:
             self.declare_partials("buckling_factors", "thickness", rows=np.repeat(np.arange(nb), len(nz)),
                                   cols=np.tile(nz, nb), **fd)
