@@ -261,8 +261,8 @@ def select_tip_nodes(mesh: ShellMesh, rule="auto", *, layout=None, axis=None, to
 
     * ``"auto"`` (default): ``"tip_rib"`` when the mesh has ribs, else ``"tip_section"``.
     * ``"tip_rib"``: the nodes of the tip rib (the rib of highest index ``<wing>/rib_<k>`` with faces
-      or chains in the mesh, all its segments) of the first wing (the layout's first wing, else the first wing with ribs in
-      ``mesh.component_names``) and of its imprint chains on the skin.
+      or chains in the mesh, all its segments) of the first wing (the layout's first wing, else the first
+      wing with ribs in ``mesh.component_names``) and of its imprint chains on the skin.
     * ``"tip_section"``: the nodes within ``tol`` (default 1e-4 of the bounding-box diagonal) of the
       tip end along the span axis (the axis of :func:`clamped_nodes`' ``"root"`` rule, ``axis`` and
       ``layout`` as there): a flat tip cap and the skin's tip section.
@@ -802,7 +802,8 @@ def analyse_shell(mesh: ShellMesh, thickness=None, *, material: dict | None = No
                   axis=None, clamp_tol: float | None = None, clamp_rotations: bool = True, up=None,
                   pressure: float = 0.0, pressure_families=LOWER_SKIN_PATTERN, nodal_forces=None,
                   tip_nodes="auto", element: str = "linear", ks_rho: float = 50.0, ks_ref=None,
-                  clamp_band: float | None = None, buckling: int = 0, supports=None, executable=None, threads: int = 1, timeout: float | None = None,
+                  clamp_band: float | None = None, buckling: int = 0, supports=None, executable=None, threads: int = 1,
+                  timeout: float | None = None,
                   workdir=None) -> ShellAnalysis:
     """Linear static CalculiX analysis of ``mesh``: write the deck, run ccx, parse, reduce.
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from shellmesh_mdao.analysis import (CCX_INSTALL_HINT, analyse_shell, clamp_band_faces, clamped_nodes, family_areas,
-                                     family_ids, find_ccx, ks_aggregate, read_dat, run_ccx, select_tip_nodes, shell_mass,
-                                     von_mises, write_deck)
+                                     family_ids, find_ccx, ks_aggregate, read_dat, run_ccx, select_tip_nodes,
+                                     shell_mass, von_mises, write_deck)
 from shellmesh_mdao.errors import OutputError, SolverError
 from shellmesh_mdao.mesh import ShellMesh, concatenate
 

@@ -44,7 +44,8 @@ class CalculixShellAnalysis(om.ExplicitComponent):
     stresses of each family, 0 for families without faces), both over the faces outside the
     band of width ``clamp_band`` at the clamp, ``tip_deflection`` (mean displacement along
     ``up`` of the ``tip_nodes``: by default the tip rib's nodes, else the tip section's) and
-    ``max_deflection`` (displacement along ``up`` of the node of largest ``|u.up|``). The last full result (:class:`~shellmesh_mdao.analysis.ShellAnalysis`:
+    ``max_deflection`` (displacement along ``up`` of the node of largest ``|u.up|``). The last full result
+    (:class:`~shellmesh_mdao.analysis.ShellAnalysis`:
     displacement field, per-element von Mises stress, ...) of the latest ``compute`` is kept in
     ``self.last_result``. Results of the last few thickness vectors are cached, so a ``compute``
     at a point already analysed (the FD base point, a repeated run_model, a change of the
