@@ -108,7 +108,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ribs", type=int, default=3, help="number of ribs (default 3)")
     ap.add_argument("--per-family", action="store_true", help="one design variable per family")
     ap.add_argument("--stress-limit", type=float, default=250e6, help="KS von Mises limit in Pa (default 250e6)")
-    ap.add_argument("--t0", type=float, default=0.004, help="initial thickness in m (default 0.004: about at the stress limit)")
+    ap.add_argument("--t0", type=float, default=0.004, help="initial thickness in m (default 0.004)")
     ap.add_argument("--t-min", type=float, default=0.0005, help="lower thickness bound in m (default 0.0005)")
     ap.add_argument("--t-max", type=float, default=0.01, help="upper thickness bound in m (default 0.01)")
     ap.add_argument("--maxiter", type=int, default=20, help="SLSQP iterations (default 20)")
