@@ -259,7 +259,7 @@ def select_tip_nodes(mesh: ShellMesh, rule="auto", *, layout=None, axis=None, to
 
     ``rule``:
 
-    * ``"auto"`` (default): ``"tip_rib"`` when the mesh has ribs, else ``"tip_section"``.
+    * ``"auto"`` (default; also None): ``"tip_rib"`` when the mesh has ribs, else ``"tip_section"``.
     * ``"tip_rib"``: the nodes of the tip rib (the rib of highest index ``<wing>/rib_<k>`` with faces
       or chains in the mesh, all its segments) of the first wing (the layout's first wing, else the first
       wing with ribs in ``mesh.component_names``) and of its imprint chains on the skin.
@@ -273,6 +273,7 @@ def select_tip_nodes(mesh: ShellMesh, rule="auto", *, layout=None, axis=None, to
     from .families import parse_component
 
     used = _used_nodes(mesh)
+    rule = "auto" if rule is None else rule
     if not isinstance(rule, str) and not (isinstance(rule, (list, tuple)) and rule and
                                           all(isinstance(r, str) for r in rule)):
         ids = np.unique(np.asarray(rule, dtype=np.int64).reshape(-1))

@@ -363,6 +363,7 @@ def test_tip_node_rules():
     m = box_families(box_beam(8, 2, 1))
     tip_section = np.flatnonzero(m.points[:, 1] > L - 1e-9)
     np.testing.assert_array_equal(select_tip_nodes(m, layout=BOX_LAYOUT), tip_section)      # no ribs: tip section
+    np.testing.assert_array_equal(select_tip_nodes(m, None, layout=BOX_LAYOUT), tip_section)
     np.testing.assert_array_equal(select_tip_nodes(m, "tip_section", axis=1), tip_section)
     top = np.unique(m.faces[m.component == 1])
     np.testing.assert_array_equal(select_tip_nodes(m, "box/upper_skin/*"), top)
