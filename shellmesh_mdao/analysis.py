@@ -7,13 +7,15 @@ are thin wrappers around them.
 :func:`write_deck`       complete CalculiX input deck: the mesh as shells (one ELSET and one
                          ``*SHELL SECTION`` per component family, written by
                          :func:`~shellmesh_mdao.export.inp_mesh_lines`), material, clamped nodes,
-                         one static step with the load case, ``*NODE PRINT`` U and ``*EL PRINT`` S.
+                         one static step with the load case, ``*NODE PRINT`` U and ``*EL PRINT`` S,
+                         optionally a ``*BUCKLE`` step.
 :func:`run_ccx`          runs ``ccx`` on a deck in its folder; :class:`SolverError` if it is
                          missing or fails (with the tail of its output).
 :func:`read_dat`         parses the ``.dat`` file: nodal displacements and integration-point stresses.
 :func:`analyse_shell`    all of it in a temporary folder, reduced to the outputs an optimiser
-                         wants: mass, maximum von Mises stress, a KS aggregate of the von Mises
-                         stress per family, tip deflection.
+                         wants: mass, maximum von Mises stress and a KS aggregate of it per
+                         family outside a band at the clamp (:func:`clamp_band_faces`), tip
+                         deflection (mean over :func:`select_tip_nodes`), buckling factors.
 
 Element choice (see ``docs/analysis.md``): ``element="linear"`` writes quads as ``S4`` and
 triangles as ``S3``; ``element="quadratic"`` adds a straight midside node on every edge and
@@ -41,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SolverError
+from .errors import ShellMeshError, SolverError
 from .families import LOWER_SKIN_PATTERN, ROOT_RIB_PATTERN
 from .export import export_order, inp_elset_names, inp_mesh_lines, resolve_material, resolve_thickness, \
     write_text_atomic
@@ -50,7 +52,8 @@ from .mesh import ShellMesh
 __all__ = [
     "ANALYSIS_MATERIAL", "ELEMENT_TYPES", "CCX_INSTALL_HINT", "LOWER_SKIN_PATTERN", "DatResults", "ShellAnalysis",
     "find_ccx", "n_families", "family_areas", "shell_mass", "family_ids", "clamped_nodes", "layout_up", "resolve_up",
-    "von_mises", "ks_aggregate", "write_deck", "run_ccx", "read_dat", "analyse_shell",
+    "select_tip_nodes", "clamp_band_faces", "CLAMP_BAND_FRACTION", "BUCKLE_LOAD_SCALE", "BUCKLE_ACCURACY", "von_mises",
+    "ks_aggregate", "write_deck", "run_ccx", "read_dat", "analyse_shell",
 ]
 
 #: Material of the analysis: generic aluminium, SI units (Pa, kg/m^3).  Any key may be
@@ -64,6 +67,18 @@ ELEMENT_TYPES = {"linear": ("S4", "S3"), "quadratic": ("S8R", "S6")}
 CCX_INSTALL_HINT = ("install CalculiX with `apt-get install calculix-ccx` (Debian/Ubuntu; the binary is `ccx`), "
                     "or `conda install -c conda-forge calculix`, or pass the path of the executable "
                     "(ccx=... / environment variable SHELLMESH_CCX)")
+
+#: The buckling step carries the static load times this scale, and the factors read are
+#: multiplied by it: CalculiX 2.20's *BUCKLE misses or misplaces factors below about 1 (its
+#: eigenvalue shift), so the step's load is kept far below the buckling load. A raw factor
+#: below 2 (a load above 500 times the buckling load) is refused.
+BUCKLE_LOAD_SCALE = 1.0e-3
+#: Relative accuracy asked of ccx's buckling eigenvalue iteration (its default is 0.01).
+BUCKLE_ACCURACY = 1.0e-6
+
+#: Default width of the band at the clamp left out of the stress outputs, as a fraction of the
+#: reach (the largest distance of a node from the clamp; about the span of a clamped wing).
+CLAMP_BAND_FRACTION = 0.05
 
 _NSET_CLAMP = "SM_CLAMPED"
 _ELSET_PPOS = "SM_PRESSURE_POS"
@@ -161,6 +176,37 @@ def resolve_up(up=None, layout=None) -> np.ndarray:
     return u / np.linalg.norm(u)
 
 
+def _span_coordinate(mesh: ShellMesh, layout=None, axis=None) -> np.ndarray:
+    """(n,) coordinate of every node along the span axis, growing from root to tip (the axis of
+    :func:`clamped_nodes`' ``"root"`` rule)."""
+    P, used = mesh.points, _used_nodes(mesh)
+    if not used.any():
+        raise SolverError("the mesh has no faces: nothing to clamp or analyse")
+    sign = 1.0
+    if axis is not None:
+        if axis not in (0, 1, 2):
+            raise SolverError(f"axis must be 0, 1 or 2 (x, y, z), got {axis!r}")
+        ax = int(axis)
+    elif _span_vector(_load_layout(layout)) is not None:
+        s = _span_vector(_load_layout(layout))
+        ax = int(np.argmax(np.abs(s)))
+        sign = 1.0 if s[ax] >= 0 else -1.0
+    else:
+        ext = P[used].max(0) - P[used].min(0)
+        ax = int(np.argmax(ext))
+    return sign * P[:, ax]
+
+
+def _family_nodes(mesh: ShellMesh, fam) -> np.ndarray:
+    """Sorted used nodes of the faces of families ``fam`` and of their imprint chains (feature
+    edges owned by them)."""
+    sel = np.zeros(mesh.n_points, bool)
+    f = mesh.faces[np.isin(mesh.component, fam)]
+    sel[f[f >= 0]] = True
+    sel[mesh.feature_edges[np.isin(mesh.feature_edge_ids, fam)].reshape(-1)] = True
+    return np.flatnonzero(sel & _used_nodes(mesh)).astype(np.int64)
+
+
 def clamped_nodes(mesh: ShellMesh, rule="root", *, layout=None, axis=None, tol: float | None = None) -> np.ndarray:
     """Node indices (0-based, sorted) clamped by the analysis.
 
@@ -191,22 +237,7 @@ def clamped_nodes(mesh: ShellMesh, rule="root", *, layout=None, axis=None, tol: 
                               "nodes of the mesh's faces")
         return ids
     if rule == "root":
-        P = mesh.points
-        sign = 1.0
-        if axis is not None:
-            if axis not in (0, 1, 2):
-                raise SolverError(f"axis must be 0, 1 or 2 (x, y, z), got {axis!r}")
-            ax = int(axis)
-        elif _span_vector(_load_layout(layout)) is not None:
-            s = _span_vector(_load_layout(layout))
-            ax = int(np.argmax(np.abs(s)))
-            sign = 1.0 if s[ax] >= 0 else -1.0
-        else:
-            ext = P[used].max(0) - P[used].min(0) if used.any() else np.zeros(3)
-            ax = int(np.argmax(ext))
-        if not used.any():
-            raise SolverError("the mesh has no faces: nothing to clamp or analyse")
-        c = sign * P[:, ax]
+        c = _span_coordinate(mesh, layout, axis)
         tol = 1e-4 * mesh.diagonal if tol is None else float(tol)
         root = c[used].min()
         return np.flatnonzero(used & (c <= root + tol)).astype(np.int64)
@@ -215,17 +246,100 @@ def clamped_nodes(mesh: ShellMesh, rule="root", *, layout=None, axis=None, tol: 
         if not len(fam):
             raise SolverError("clamp='root_rib' needs a family named '<wing>/rib_0' (the root rib) in the mesh; "
                               f"the families are {list(mesh.component_names)}: use clamp='root' or give node ids")
-        sel = np.zeros(mesh.n_points, bool)
-        f = mesh.faces[np.isin(mesh.component, fam)]
-        sel[f[f >= 0]] = True
-        fe = mesh.feature_edges[np.isin(mesh.feature_edge_ids, fam)]
-        sel[fe.reshape(-1)] = True
-        ids = np.flatnonzero(sel & used).astype(np.int64)
+        ids = _family_nodes(mesh, fam)
         if not len(ids):
             raise SolverError("the root rib '*/rib_0' has no nodes in the mesh (no faces, no imprint chain): run "
                               "the pipeline through the imprint stage or use clamp='root'")
         return ids
     raise SolverError(f"unknown clamp rule {rule!r}: use 'root', 'root_rib' or an array of node indices")
+
+
+def select_tip_nodes(mesh: ShellMesh, rule="auto", *, layout=None, axis=None, tol: float | None = None) -> np.ndarray:
+    """Node indices (0-based, sorted) whose mean displacement along ``up`` is the tip deflection.
+
+    ``rule``:
+
+    * ``"auto"`` (default; also None): ``"tip_rib"`` when the mesh has ribs, else ``"tip_section"``.
+    * ``"tip_rib"``: the nodes of the tip rib (the rib of highest index ``<wing>/rib_<k>`` with faces
+      or chains in the mesh, all its segments) of the first wing (the layout's first wing, else the first
+      wing with ribs in ``mesh.component_names``) and of its imprint chains on the skin.
+    * ``"tip_section"``: the nodes within ``tol`` (default 1e-4 of the bounding-box diagonal) of the
+      tip end along the span axis (the axis of :func:`clamped_nodes`' ``"root"`` rule, ``axis`` and
+      ``layout`` as there): a flat tip cap and the skin's tip section.
+    * a family name or ``fnmatch`` pattern, or a list of them (e.g. ``"wing/rib_5"``): the nodes of
+      those families' faces and imprint chains.
+    * an array of node indices: used as given (checked for range and use).
+    """
+    from .families import parse_component
+
+    used = _used_nodes(mesh)
+    rule = "auto" if rule is None else rule
+    if not isinstance(rule, str) and not (isinstance(rule, (list, tuple)) and rule and
+                                          all(isinstance(r, str) for r in rule)):
+        ids = np.unique(np.asarray(rule, dtype=np.int64).reshape(-1))
+        if not len(ids) or ids.min() < 0 or ids.max() >= mesh.n_points or not used[ids].all():
+            raise SolverError(f"tip_nodes must be a non-empty list of node indices in [0, {mesh.n_points}) used by "
+                              "the mesh's faces, a family name/pattern, or 'auto', 'tip_rib', 'tip_section'")
+        return ids
+    ribs = {}                      # wing -> [(rib index, family id)] of the ribs with faces or chains
+    present = np.zeros(max(n_families(mesh), len(mesh.component_names)), bool)
+    fe = mesh.feature_edge_ids
+    present[np.concatenate([mesh.component, fe[(fe >= 0) & (fe < len(present))]]).astype(np.int64)] = True
+    for i, n in enumerate(mesh.component_names):
+        if not present[i]:
+            continue
+        try:
+            c = parse_component(n)
+        except ShellMeshError:
+            continue
+        if c.kind == "rib" and c.wing is not None:
+            ribs.setdefault(c.wing, []).append((c.index, i))
+    if rule == "auto":
+        rule = "tip_rib" if ribs else "tip_section"
+    if rule == "tip_rib":
+        lay = _load_layout(layout)
+        first = [w.name for w in (lay.wings + lay.station_wings)] if lay is not None else []
+        wing = next((w for w in first if w in ribs), next(iter(ribs), None))
+        if wing is None:
+            raise SolverError("tip_nodes='tip_rib' needs rib families '<wing>/rib_<k>' in the mesh; the families "
+                              f"are {list(mesh.component_names)[:12]}: use tip_nodes='tip_section', a family name "
+                              "or node ids")
+        k = max(k for k, _ in ribs[wing])
+        ids = _family_nodes(mesh, [i for kk, i in ribs[wing] if kk == k])
+    elif rule == "tip_section":
+        c = _span_coordinate(mesh, layout, axis)
+        tol = 1e-4 * mesh.diagonal if tol is None else float(tol)
+        ids = np.flatnonzero(used & (c >= c[used].max() - tol)).astype(np.int64)
+    else:
+        ids = _family_nodes(mesh, family_ids(mesh, rule))
+    if not len(ids):
+        raise SolverError(f"tip_nodes={rule!r} selects no node of the mesh (no family matches, or its family has "
+                          f"no faces); the families are {list(mesh.component_names)[:12]}: give another family, "
+                          "'tip_section' or node ids")
+    return ids
+
+
+def clamp_band_faces(mesh: ShellMesh, clamped, distance: float | None = None) -> tuple[np.ndarray, float]:
+    """Faces near the clamp, left out of the stress outputs: ``(in_band (m,) bool, distance)``.
+
+    A face is in the band when one of its nodes lies closer than ``distance`` (straight line) to
+    a clamped node. ``distance`` defaults to :data:`CLAMP_BAND_FRACTION` (5 %) of the reach, the
+    largest distance of a used node from the clamped nodes (about the span of a clamped wing);
+    0 leaves every face in."""
+    from scipy.spatial import cKDTree
+
+    clamped = np.asarray(clamped, dtype=np.int64).reshape(-1)
+    used = np.flatnonzero(_used_nodes(mesh))
+    d = np.full(mesh.n_points, np.inf)
+    d[used] = cKDTree(mesh.points[clamped]).query(mesh.points[used])[0]
+    if distance is None:
+        distance = CLAMP_BAND_FRACTION * float(d[used].max())
+    distance = float(distance)
+    if not np.isfinite(distance) or distance < 0:
+        raise SolverError(f"clamp_band must be a distance >= 0 (mesh units; 0: no band), got {distance!r}")
+    f = mesh.faces
+    near = np.where(f >= 0, d[np.maximum(f, 0)], np.inf).min(1) < distance
+    return near, distance
 
 
 def von_mises(stress: np.ndarray) -> np.ndarray:
@@ -355,6 +469,29 @@ def _quadratic_elements(mesh: ShellMesh, mids: np.ndarray) -> list:
     return out
 
 
+def _support_lines(mesh: ShellMesh, supports) -> list:
+    """``*BOUNDARY`` lines of ``supports`` = ``[(node_ids, dofs), ...]`` (0-based ids, dofs 1-6)."""
+    if not supports:
+        return []
+    out = ["*BOUNDARY\n"]
+    used = _used_nodes(mesh)
+    for item in supports:
+        try:
+            ids, dofs = item
+            ids = np.unique(np.asarray(ids, dtype=np.int64).reshape(-1))
+            dofs = sorted({int(d) for d in np.atleast_1d(dofs)})
+        except (TypeError, ValueError):
+            ids, dofs = np.zeros(0, np.int64), []
+        if not len(ids) or not dofs or dofs[0] < 1 or dofs[-1] > 6 or ids.min() < 0 or ids.max() >= mesh.n_points \
+                or not used[ids].all():
+            raise SolverError(f"supports must be a list of (node_ids, dofs) pairs: 0-based ids of nodes used by the "
+                              f"mesh's faces (in [0, {mesh.n_points})) and degrees of freedom 1-6 (1-3 translations, "
+                              "4-6 rotations)")
+        for d in dofs:
+            out.extend(_rows(f"%d, {d}, {d}\n", [ids + 1]))
+    return out
+
+
 def _nodal_forces(mesh: ShellMesh, nodal_forces):
     if nodal_forces is None:
         return np.zeros(0, np.int64), np.zeros((0, 3))
@@ -384,7 +521,7 @@ def _nodal_forces(mesh: ShellMesh, nodal_forces):
 
 def write_deck(mesh: ShellMesh, path, *, thickness=None, material: dict | None = None, clamped,
                up=None, pressure: float = 0.0, pressure_families=LOWER_SKIN_PATTERN, nodal_forces=None,
-               element: str = "linear", clamp_rotations: bool = True) -> dict:
+               element: str = "linear", clamp_rotations: bool = True, supports=None, buckling: int = 0) -> dict:
     """Write a complete CalculiX input deck for a linear static analysis of ``mesh``.
 
     Parameters
@@ -402,6 +539,10 @@ def write_deck(mesh: ShellMesh, path, *, thickness=None, material: dict | None =
         a (3,) force is applied to every listed node; repeated nodes get the sum).
     element : ``"linear"`` (S4 quads / S3 triangles) or ``"quadratic"`` (S8R / S6 with a
         straight midside node per edge).
+    supports : more constraints, ``[(node_ids, dofs), ...]``: 0-based node ids and the degrees of
+        freedom (1-3 translations, 4-6 rotations) fixed at 0 (e.g. a simple support: dof 3).
+    buckling : with ``n > 0``, a second step (``*BUCKLE``) asks for the ``n`` lowest buckling
+        factors of the same load case (:func:`read_dat` reads them).
 
     Element ``k`` of the deck (1-based id ``k + 1``) is face ``export_order(mesh)[k]``; node
     ``i`` has id ``i + 1``. The step prints ``U`` of every node and ``S`` (integration-point
@@ -436,8 +577,9 @@ def write_deck(mesh: ShellMesh, path, *, thickness=None, material: dict | None =
         e = mesh.topology().edges
         fix = np.concatenate([fix, mesh.n_points + 1 + np.flatnonzero(is_c[e].all(1))])
     tail = [f"*NSET, NSET={_NSET_CLAMP}\n", _id_lines(fix),
-            f"*BOUNDARY\n{_NSET_CLAMP}, 1, {6 if clamp_rotations else 3}\n",
+            f"*BOUNDARY\n{_NSET_CLAMP}, 1, {6 if clamp_rotations else 3}\n", *_support_lines(mesh, supports),
             "*STEP\n*STATIC\n"]
+    loads = []                                # the step's loads: ("P", elset, p) and ("C", ids, dofs, forces)
     n_p = 0
     pressure = float(pressure)
     if not np.isfinite(pressure):
@@ -459,15 +601,31 @@ def write_deck(mesh: ShellMesh, path, *, thickness=None, material: dict | None =
         for name, sel, val in ((_ELSET_PPOS, pos, pressure), (_ELSET_PNEG, neg, -pressure)):
             if len(sel):
                 tail.insert(0, f"*ELSET, ELSET={name}\n" + _id_lines(np.sort(eid[sel])))
-                tail.append(f"*DLOAD\n{name}, P, {val!r}\n")
+                loads.append(("P", name, val))
     ids, f = _nodal_forces(mesh, nodal_forces)
     if len(ids):
         load += f.sum(0)
         nz = np.nonzero(f)
         if len(nz[0]):
-            tail.append("*CLOAD\n")
-            tail.extend(_rows("%d, %d, %r\n", [ids[nz[0]] + 1, nz[1] + 1, f[nz]]))
+            loads.append(("C", ids[nz[0]] + 1, nz[1] + 1, f[nz]))
+
+    def load_lines(scale):
+        out = []
+        for ld in loads:
+            if ld[0] == "P":
+                out.append(f"*DLOAD\n{ld[1]}, P, {ld[2] * scale!r}\n")
+            else:
+                out += ["*CLOAD\n", *_rows("%d, %d, %r\n", [ld[1], ld[2], ld[3] * scale])]
+        return out
+
+    tail += load_lines(1.0)
     tail.append("*NODE PRINT, NSET=NALL\nU\n*EL PRINT, ELSET=EALL\nS\n*END STEP\n")
+    nb = int(buckling)
+    if nb < 0:
+        raise SolverError(f"buckling must be the number of buckling factors wanted (0: none), got {buckling!r}")
+    if nb:       # loads of the static step again, scaled (a perturbation step drops them); no printout
+        tail += [f"*STEP\n*BUCKLE\n{nb}, {BUCKLE_ACCURACY!r}\n", *load_lines(BUCKLE_LOAD_SCALE),
+                 "*NODE PRINT, NSET=NALL, FREQUENCY=0\nU\n*EL PRINT, ELSET=EALL, FREQUENCY=0\nS\n*END STEP\n"]
     write_text_atomic(path, "".join(blocks) + "".join(tail))
     return {"element_of_face": eid, "n_pressure_faces": n_p, "load": load, "n_nodes": n_written}
 
@@ -523,15 +681,19 @@ class DatResults:
 
     ``node_ids`` (p,) 1-based ids with ``displacement`` (p, 3); ``element_ids`` (r,) 1-based
     element id and ``integration_point`` (r,) of each stress row ``stress`` (r, 6)
-    ``(sxx, syy, szz, sxy, sxz, syz)`` (global axes)."""
+    ``(sxx, syy, szz, sxy, sxz, syz)`` (global axes); ``buckling_factors`` (k,) of a ``*BUCKLE``
+    step in mode order (empty without one)."""
 
     node_ids: np.ndarray
     displacement: np.ndarray
     element_ids: np.ndarray
     integration_point: np.ndarray
     stress: np.ndarray
+    buckling_factors: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
+_BUCKLE_HEADER = "B U C K L I N G   F A C T O R   O U T P U T"
+_BUCKLE_ROW = re.compile(r"^ *(\d+) +(\S+) *$", re.M)
 _DAT_HEADER = re.compile(r"^ *(displacements|stresses) \(([^)]*)\) for set (\S+) and time +(\S+) *$", re.M)
 
 
@@ -566,6 +728,13 @@ def read_dat(path) -> DatResults:
     tables of a CalculiX ``.dat`` file (the last time written). Raises :class:`SolverError` when
     a table is missing."""
     text = Path(path).read_text(encoding="utf-8", errors="replace")
+    k = text.find(_BUCKLE_HEADER)
+    factors = np.zeros(0)
+    if k >= 0:
+        block = text[k + len(_BUCKLE_HEADER):].split("E I G E N", 1)[0]
+        rows = _BUCKLE_ROW.findall(block)
+        factors = _numbers("\n".join(v for _, v in rows), 1, "buckling factor").reshape(-1) if rows else factors
+        text = text[:k]
     heads = list(_DAT_HEADER.finditer(text))
     last: dict = {}
     for i, h in enumerate(heads):
@@ -580,7 +749,7 @@ def read_dat(path) -> DatResults:
     u = _numbers("\n".join(last["displacements"][1]), 4, "displacement")
     s = _numbers("\n".join(last["stresses"][1]), 8, "stress")
     return DatResults(u[:, 0].astype(np.int64), u[:, 1:4], s[:, 0].astype(np.int64), s[:, 1].astype(np.int64),
-                      s[:, 2:8])
+                      s[:, 2:8], factors)
 
 
 # --------------------------------------------------------------------------- all in one
@@ -591,12 +760,21 @@ class ShellAnalysis:
     ``displacement``    (n, 3) displacement of every mesh node (0 for unused nodes).
     ``von_mises``       (m,) largest integration-point von Mises stress of every face.
     ``mass``            density * sum(area * thickness).
-    ``max_von_mises``   largest von Mises stress of the model.
-    ``ks_von_mises``    (n_families,) KS aggregate of ``von_mises`` per family (0 if no faces).
-    ``tip_deflection``  displacement along ``up`` of the tip node (the node of largest
-                        ``|u . up|`` among ``tip_nodes``, or among all nodes), signed.
-    ``up``, ``clamped`` (node indices), ``load`` (total applied force), ``seconds`` (ccx run),
-    ``workdir`` (the kept folder, or None).
+    ``max_von_mises``   largest von Mises stress of the faces outside the clamp band.
+    ``ks_von_mises``    (n_families,) KS aggregate of ``von_mises`` per family over its faces
+                        outside the clamp band (0 if it has none).
+    ``tip_deflection``  mean displacement along ``up`` of the ``tip_nodes`` (:func:`select_tip_nodes`).
+    ``max_deflection``  displacement along ``up`` (signed) of the node of largest ``|u . up|``
+                        of the whole model.
+    ``in_clamp_band``   (m,) True for the faces left out of the stress outputs
+                        (:func:`clamp_band_faces`, of width ``clamp_band``).
+    ``peak_von_mises``  largest von Mises stress of all faces, the clamp band included.
+    ``buckling_factors`` (k,) the ``buckling`` lowest buckling factors of the load case (load
+                        multipliers, in ccx's order; empty without ``buckling``).
+    ``ks_buckling``     KS aggregate (``ks_rho``) of ``1 / buckling_factors``: a smooth upper bound
+                        of the load over the lowest buckling load (<= 1: no buckling); 0 without.
+    ``up``, ``clamped`` and ``tip_nodes`` (node indices), ``load`` (total applied force),
+    ``seconds`` (ccx run), ``workdir`` (the kept folder, or None).
     """
 
     displacement: np.ndarray
@@ -612,20 +790,34 @@ class ShellAnalysis:
     element: str
     workdir: Path | None = None
     info: dict = field(default_factory=dict)
+    max_deflection: float = 0.0
+    tip_nodes: np.ndarray | None = None
+    in_clamp_band: np.ndarray | None = None
+    clamp_band: float = 0.0
+    peak_von_mises: float = 0.0
+    buckling_factors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    ks_buckling: float = 0.0
 
 
 def analyse_shell(mesh: ShellMesh, thickness=None, *, material: dict | None = None, clamp="root", layout=None,
                   axis=None, clamp_tol: float | None = None, clamp_rotations: bool = True, up=None,
                   pressure: float = 0.0, pressure_families=LOWER_SKIN_PATTERN, nodal_forces=None,
-                  tip_nodes=None, element: str = "linear", ks_rho: float = 50.0, ks_ref=None,
-                  executable=None, threads: int = 1, timeout: float | None = None, workdir=None) -> ShellAnalysis:
+                  tip_nodes="auto", element: str = "linear", ks_rho: float = 50.0, ks_ref=None,
+                  clamp_band: float | None = None, buckling: int = 0, supports=None, executable=None, threads: int = 1,
+                  timeout: float | None = None,
+                  workdir=None) -> ShellAnalysis:
     """Linear static CalculiX analysis of ``mesh``: write the deck, run ccx, parse, reduce.
 
     ``clamp`` is a rule or node ids (:func:`clamped_nodes`, with ``layout``, ``axis`` and
     ``clamp_tol``); ``up`` defaults to the layout's first wing's ``up``; the load case is
     ``pressure`` on ``pressure_families`` (along ``+up``) plus ``nodal_forces`` (see
-    :func:`write_deck`); at least one must be non-zero. ``tip_nodes`` (0-based) restricts the
-    tip deflection to those nodes. ``ks_rho``/``ks_ref`` parametrise :func:`ks_aggregate`.
+    :func:`write_deck`); at least one must be non-zero. ``tip_nodes`` (a rule of :func:`select_tip_nodes`,
+    a family name/pattern or node ids) are the nodes whose mean ``u . up`` is the tip deflection.
+    ``ks_rho``/``ks_ref`` parametrise :func:`ks_aggregate`; the faces within ``clamp_band`` of a
+    clamped node (:func:`clamp_band_faces`; default 5 % of the reach) are left out of ``max_von_mises``
+    and ``ks_von_mises``. ``buckling = n > 0`` adds a ``*BUCKLE`` step (the ``n`` lowest buckling
+    factors of the same load case and their KS); ``supports`` are more constraints
+    (:func:`write_deck`).
     ``workdir``: a folder (created if missing) where the deck and results are kept; by default
     a temporary folder that is removed. Raises :class:`SolverError` (ccx missing or failed,
     bad options) or :class:`~shellmesh_mdao.errors.OutputError` (bad thickness/material).
@@ -641,12 +833,8 @@ def analyse_shell(mesh: ShellMesh, thickness=None, *, material: dict | None = No
     mat = resolve_material({**ANALYSIS_MATERIAL, **(material or {})})
     t = resolve_thickness(mesh, thickness)
     find_ccx(executable)                       # fail before writing anything
-    if tip_nodes is not None:
-        tip = np.unique(np.asarray(tip_nodes, dtype=np.int64).reshape(-1))
-        if not len(tip) or tip.min() < 0 or tip.max() >= mesh.n_points:
-            raise SolverError(f"tip_nodes must be a non-empty list of node indices in [0, {mesh.n_points})")
-    else:
-        tip = np.flatnonzero(_used_nodes(mesh))
+    tip = select_tip_nodes(mesh, "auto" if tip_nodes is None else tip_nodes, layout=lay, axis=axis)
+    band, band_width = clamp_band_faces(mesh, ids, clamp_band)
     keep = workdir is not None
     tmp = None
     if keep:
@@ -663,7 +851,7 @@ def analyse_shell(mesh: ShellMesh, thickness=None, *, material: dict | None = No
         deck = folder / "shell.inp"
         info = write_deck(mesh, deck, thickness=t, material=mat, clamped=ids, up=u, pressure=pressure,
                           pressure_families=pressure_families, nodal_forces=(fids, fvec), element=element,
-                          clamp_rotations=clamp_rotations)
+                          clamp_rotations=clamp_rotations, supports=supports, buckling=buckling)
         t0 = time.perf_counter()
         dat = run_ccx(deck, executable=executable, threads=threads, timeout=timeout)
         seconds = time.perf_counter() - t0
@@ -683,13 +871,32 @@ def analyse_shell(mesh: ShellMesh, thickness=None, *, material: dict | None = No
     vm_ip = von_mises(res.stress)
     vm = np.zeros(mesh.n_faces)
     np.maximum.at(vm, order[res.element_ids - 1], vm_ip)
+    lam, ks_b = _buckling(res.buckling_factors, int(buckling), ks_rho)
     nf = n_families(mesh)
-    ks = ks_aggregate(vm, mesh.component, nf, rho=ks_rho, ref=ks_ref)
-    d = disp[tip] @ u
+    out = ~band
+    ks = ks_aggregate(vm[out], mesh.component[out], nf, rho=ks_rho, ref=ks_ref)
+    d = disp @ u
     k = int(np.argmax(np.abs(d)))
     info.pop("element_of_face", None)
     return ShellAnalysis(
         displacement=disp, von_mises=vm, mass=float(mat["rho"]) * float(family_areas(mesh) @ t),
-        max_von_mises=float(vm.max()) if len(vm) else 0.0, ks_von_mises=ks, tip_deflection=float(d[k]), up=u,
-        clamped=ids, load=info["load"], seconds=seconds, element=element, workdir=folder if keep else None,
-        info=info)
+        max_von_mises=float(vm[out].max()) if out.any() else 0.0, ks_von_mises=ks,
+        tip_deflection=float(d[tip].mean()), up=u, clamped=ids, load=info["load"], seconds=seconds, element=element,
+        workdir=folder if keep else None, info=info, max_deflection=float(d[k]), tip_nodes=tip, in_clamp_band=band,
+        clamp_band=band_width, peak_von_mises=float(vm.max()), buckling_factors=lam, ks_buckling=ks_b)
+
+
+def _buckling(raw: np.ndarray, wanted: int, rho: float) -> tuple[np.ndarray, float]:
+    """Buckling factors of the static load (the raw factors of the scaled buckling step times
+    :data:`BUCKLE_LOAD_SCALE`) and the KS of their inverses (0 without a buckling step)."""
+    if not wanted:
+        return np.zeros(0), 0.0
+    if len(raw) < wanted or not np.all(np.isfinite(raw)) or np.any(raw == 0):
+        raise SolverError(f"CalculiX returned {len(raw)} usable buckling factors of the {wanted} asked for: ask "
+                          "for fewer (buckling=...) or check the supports (a free body has zero factors)")
+    if np.abs(raw).min() < 2.0:
+        raise SolverError(f"the lowest buckling factor, {np.abs(raw).min() * BUCKLE_LOAD_SCALE:.3g}, is too small to "
+                          "be computed reliably (the load is more than 500 times the buckling load): lower the "
+                          "load or thicken the structure")
+    factors = raw * BUCKLE_LOAD_SCALE
+    return factors, float(ks_aggregate(1.0 / factors, np.zeros(len(factors), np.int64), 1, rho=rho)[0])

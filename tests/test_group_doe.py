@@ -144,6 +144,76 @@ def _mpi_command():
     return cmd, ""
 
 
+_NAMES_SCRIPT = """
+import sys
+import openmdao.api as om
+from openmdao.utils.mpi import MPI
+from shellmesh_mdao.components.group import DOEDriver, OneProcessModelVector
+comm = MPI.COMM_WORLD if MPI is not None else None
+p = om.Problem(comm=comm, reports=False)
+p.model.add_subsystem("c", om.ExecComp("y = x ** 2"), promotes=["*"])
+p.model.add_design_var("x", lower=0.0, upper=1.0)
+p.model.add_objective("y")
+p.driver = DOEDriver(om.ListGenerator([[("x", 0.1 * i)] for i in range(5)]))
+if comm is not None and comm.size > 1:
+    p.driver.options["run_parallel"] = True
+    p.driver.options["procs_per_model"] = 1
+p.driver.add_recorder(om.SqliteRecorder(sys.argv[1]))
+p.setup(distributed_vector_class=OneProcessModelVector) if comm is not None and comm.size > 1 else p.setup()
+p.run_driver()
+p.cleanup()
+print("LOCAL_CASES", p.driver.iter_count)
+"""
+
+
+def _recorded_names(files, meta=None) -> dict:
+    """case name -> recorded x of every driver case in the files."""
+    out = {}
+    for f in files:
+        cr = om.CaseReader(str(f), metadata_filename=str(meta) if meta is not None else None)
+        for name in cr.list_cases("driver", recurse=False, out_stream=None):
+            assert name not in out, f"case name {name} recorded twice"
+            out[name] = float(cr.get_case(name).get_val("x")[0])
+    return out
+
+
+def test_doe_case_names_serial(tmp_path):
+    """Serially, DOEDriver keeps OpenMDAO's case names: rank0:<driver>|i, i the case's index."""
+    script = tmp_path / "names.py"
+    script.write_text(_NAMES_SCRIPT)
+    env = {**os.environ, "OPENMDAO_WORKDIR": str(tmp_path),
+           "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run([sys.executable, str(script), "cases.sql"], capture_output=True, text=True, env=env,
+                       timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    names = _recorded_names(tmp_path.rglob("cases.sql"))
+    assert names == {f"rank0:DOEDriver_List|{i}": pytest.approx(0.1 * i) for i in range(5)}
+
+
+def test_doe_case_names_unique_across_ranks(tmp_path):
+    """Under mpirun -n 2 each process records its own cases; the names are unique across the two
+    files (rank of the process, index of the case in the whole design) and name the right case
+    (OpenMDAO alone names both files' cases rank0:...|0, |1, ...)."""
+    mpi, why = _mpi_command()
+    if mpi is None:
+        pytest.skip(why)
+    script = tmp_path / "names.py"
+    script.write_text(_NAMES_SCRIPT)
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "OPENMDAO_WORKDIR": str(tmp_path),
+           "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")])}
+    r = subprocess.run([*mpi, sys.executable, str(script), "cases.sql"], capture_output=True, text=True, env=env,
+                       timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-3000:])
+    assert sorted(int(w.split()[1]) for w in r.stdout.splitlines() if w.startswith("LOCAL_CASES")) == [2, 3]
+    files = sorted(tmp_path.rglob("cases.sql_[0-9]"))
+    assert len(files) == 2
+    meta = next(tmp_path.rglob("cases.sql_meta"))
+    names = _recorded_names(files, meta)
+    # case i of the design ran on rank i % 2 and carries x = 0.1 i
+    assert names == {f"rank{i % 2}:DOEDriver_List|{i}": pytest.approx(0.1 * i) for i in range(5)}
+
+
 @pytest.mark.slow
 @needs_ccx
 def test_doe_serial_and_mpi_record_identical_outputs(tmp_path):

@@ -49,6 +49,33 @@ class DOEDriver(om.DOEDriver):
     design point could not be meshed or analysed. Use it like ``om.DOEDriver``.
     """
 
+    def _parallel_generator(self, design_vars, model=None):
+        """The cases of this process (every ``ncolors``-th, as OpenMDAO deals them), each with its
+        index in the whole design (kept for the case name)."""
+        ncolors = self._problem_comm.size // self.options["procs_per_model"]
+        for i, case in enumerate(self.options["generator"](design_vars, model)):
+            if i % ncolors == self._color:
+                self._case_index = i
+                yield case
+
+    def _run_case(self, case):
+        """Run one case under a name unique across the processes of a parallel DOE:
+        ``rank<r>:<driver name>|<i>``, ``r`` the rank in the problem's communicator and ``i`` the
+        index of the case in the whole design (the generator's order). OpenMDAO names them with the
+        rank in the one-process model communicator (always 0) and the process's own counter, so
+        the files of two processes both hold ``rank0:...|0``, ``|1``, ... A serial run keeps
+        OpenMDAO's names (``rank0:...|i``). ``iter_count`` still counts this process's cases."""
+        local = self.iter_count
+        index = getattr(self, "_case_index", None)
+        if self.options["run_parallel"] and index is not None:
+            self.iter_count = index
+        self._recording_iter.rank = self._problem_comm.rank
+        try:
+            super()._run_case(case)
+        finally:
+            self.iter_count = local
+            self._case_index = None
+
     def _get_recorder_metadata(self, case_name):
         meta = getattr(self, "_metadata", None)
         if not isinstance(meta, dict) or "success" not in meta:
