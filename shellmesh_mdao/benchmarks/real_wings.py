@@ -41,7 +41,7 @@ LAYOUTS = {"10 ribs, spars 0.15/0.65": (10, (0.15, 0.65)),
 #: rib orientations of the matrix
 ORIENTATIONS = ("normal_to_spar", "streamwise", "normal_to_midchord")
 #: element size = semi-span / divisor
-DIVISORS = (40, 80)
+DIVISORS = (20, 40, 80)
 
 
 def span_axis(manifest: dict, geometry: str) -> str:
