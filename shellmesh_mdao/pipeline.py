@@ -241,12 +241,25 @@ def stage_remesh(state: PipelineState, cache=None) -> PipelineState:
     if hit is not None:
         st = state.but(mesh=hit.mesh, stage="remesh")
         st.report["remesh_cache"] = {"hit": True, "seconds": hit.seconds}
+        _report_sizing(st, hit.sizing)
         return st
     t0 = time.perf_counter()
-    skin = remesh_skin(state.surface, REMESH_FACTOR * state.size, o, locator=state.locator, size_field=field)
+    rep = {}
+    skin = remesh_skin(state.surface, REMESH_FACTOR * state.size, o, locator=state.locator, size_field=field,
+                       report=rep)
     if cache is not None:
-        cache.put(key, skin, time.perf_counter() - t0)
-    return state.but(mesh=skin, stage="remesh")
+        cache.put(key, skin, time.perf_counter() - t0, rep.get("sizing"))
+    st = state.but(mesh=skin, stage="remesh")
+    _report_sizing(st, rep.get("sizing"))
+    return st
+
+
+def _report_sizing(state: PipelineState, sizing) -> None:
+    """The report's ``size_field.skin``: the remesh's sizing summary (in units of its target)."""
+    if sizing is not None:
+        sf = dict(state.report.get("size_field") or {})
+        sf["skin"] = {**sizing, "target": REMESH_FACTOR * state.size}
+        state.report["size_field"] = sf
 
 
 def stage_imprint(state: PipelineState) -> PipelineState:

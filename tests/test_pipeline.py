@@ -586,3 +586,24 @@ def test_bundled_wing_leading_edge_meets_the_guarantees(size, seed):
     g = check_guarantees(res)
     assert g["min_scaled_jacobian"] > 0.2
     assert res.report["off_surface"]["count"] == 0
+
+
+def test_report_size_field_skin_is_the_remesh_sizing_and_survives_a_cache_hit():
+    """report['size_field']['skin']: the skin's sizing in units of the remesh target (min <= median
+    <= max = 1 on this wing, refined where its nose turns and its tip is thin), the refined area
+    split by reason (the shares add up to the refined share); a cache hit reports the same."""
+    from shellmesh_mdao.remesh import RemeshCache
+    from shellmesh_mdao.remesh.surface import SIZING_REASONS
+
+    cache = RemeshCache(1)
+    runs = [pl.run_pipeline(small_wing(), small_layout(), SIZE, until="remesh", progress=False, remesh_cache=cache)
+            for _ in range(2)]
+    assert cache.hits == 1 and runs[1].report["remesh_cache"]["hit"]
+    sk = runs[0].report["size_field"]["skin"]
+    assert sk["target"] == pytest.approx(pl.REMESH_FACTOR * SIZE)
+    assert 0.0 < sk["min"] < 0.95 <= sk["median"] <= sk["max"] == pytest.approx(1.0)
+    assert set(sk["refined_by"]) == set(SIZING_REASONS)
+    assert 0.0 < sk["refined"] < 0.5
+    assert sum(sk["refined_by"].values()) == pytest.approx(sk["refined"])
+    assert sk["refined_by"]["grading"] > 0.0
+    assert runs[1].report["size_field"]["skin"] == sk

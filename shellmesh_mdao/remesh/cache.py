@@ -45,10 +45,12 @@ def freeze(mesh) -> None:
 
 @dataclass(frozen=True)
 class CachedSkin:
-    """A remeshed skin and the seconds its remesh took."""
+    """A remeshed skin, the seconds its remesh took and its sizing summary (the remesh report's
+    ``sizing``, the pipeline report's ``size_field.skin``; None when not given)."""
 
     mesh: object
     seconds: float
+    sizing: dict | None = None
 
 
 class RemeshCache:
@@ -80,12 +82,13 @@ class RemeshCache:
             self.hits += 1
         return hit
 
-    def put(self, key, mesh, seconds: float) -> None:
-        """Store ``mesh`` (made read-only) under ``key``; ``seconds``: its remesh time."""
+    def put(self, key, mesh, seconds: float, sizing: dict | None = None) -> None:
+        """Store ``mesh`` (made read-only) under ``key``; ``seconds``: its remesh time; ``sizing``:
+        its sizing summary (kept with it, so that a hit reports it too)."""
         freeze(mesh)
         self.misses += 1
         self.seconds += float(seconds)
-        self._entries[key] = CachedSkin(mesh, float(seconds))
+        self._entries[key] = CachedSkin(mesh, float(seconds), None if sizing is None else dict(sizing))
         self._entries.move_to_end(key)
         while len(self._entries) > self.max_entries:
             self._entries.popitem(last=False)

@@ -436,7 +436,8 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = Re
                            n_standing_faces=int(len(_standing_faces(W, ctx))),
                            n_input_triangles=len(surf.T),
                            n_feature_chains=int(surf.n_chains), n_corners=int((W.kind == CORNER).sum()),
-                           max_deviation=delta, min_edge=h_min, target_edge=target))
+                           max_deviation=delta, min_edge=h_min, target_edge=target,
+                           sizing=surf.sizing_summary()))
     return out
 
 

@@ -16,7 +16,15 @@ from ..core.locator import SurfaceLocator, closest_point_on_triangles
 from ..core.sizefield import SizeField
 from .common import CHAIN, CORNER, EdgeTable, tri_normals
 
-__all__ = ["InputSurface", "project_compatible", "MAX_TURN", "TURN_MIN_EDGE_FRACTION"]
+__all__ = ["InputSurface", "project_compatible", "MAX_TURN", "TURN_MIN_EDGE_FRACTION", "SIZING_REASONS"]
+
+#: why the sizing asks for less than the target at an input vertex (:attr:`InputSurface.reason`,
+#: the remesh report's ``sizing``): the chordal-deviation bound over a kink or the curvature, and
+#: the deviation passes' shrinking; the turning bound across a nose tighter than the edge; a thin
+#: feature (feature lines facing each other, a dangling line end); a feature line's own turning
+#: or shortness; the local sizes asked for (members closer than the element size); the
+#: gradation from a smaller size nearby
+SIZING_REASONS = ("curvature", "nose_turning", "thin_feature", "feature_lines", "close_members", "grading")
 
 #: the sizing's turning bound: where the chordal-deviation bound would let an edge turn more than
 #: 90 degrees (a fold of radius below 0.32 target edges: a leading-edge nose), no edge spans more
@@ -117,6 +125,7 @@ class InputSurface:
 
         self._ctree = None
         self.h = np.full(nv, self.target)
+        self.reason = np.full(nv, -1, np.int8)
         self.h_min = self.target
         self.field = None
         self.turn_field = None
@@ -423,6 +432,14 @@ class InputSurface:
         f1 = np.where(topo.h1 >= 0, topo.h1 // 3, -1)
         delta = self.delta
         h = np.full(nv, target)
+        why = np.full(nv, -1, np.int8)
+
+        def note(hnew, code):
+            # the reason of each vertex whose size the term lowers
+            lower = hnew < h
+            why[lower] = code
+            return np.where(lower, hnew, h)
+
         # (1) isolated kinks: a chord of length l across a kink of angle theta deviates by
         #     l theta / 4, so l <= 4 delta / theta at both ends of every non-feature edge.
         inner = f1 >= 0
@@ -430,8 +447,10 @@ class InputSurface:
         theta = np.radians(self.edge_dihedral[sel])
         with np.errstate(divide="ignore"):
             hk = np.where(theta > 0, 4.0 * delta / theta, np.inf)
+        hkv = np.full(nv, np.inf)
         for col in (0, 1):
-            np.minimum.at(h, E[sel, col], hk)
+            np.minimum.at(hkv, E[sel, col], hk)
+        h = note(hkv, 0)
         # (2) smooth curvature, measured at the scale rho = h_min so that the estimate does
         #     not depend on how finely the input is tessellated: total turning
         #     sum(theta_e * len_e) / total area over the 3x3x3 voxels of size rho around each
@@ -447,7 +466,7 @@ class InputSurface:
         kappa = _voxel_ratio(P, mass, varea, rho)
         with np.errstate(divide="ignore"):
             hs = np.where(kappa > 0, np.sqrt(8.0 * delta / kappa), np.inf)
-        h = np.minimum(h, hs)
+        h = note(hs, 0)
         # (2b) turning: the chord bound holds the deviation, but across a fold of radius
         #      r < 2 delta (a leading-edge nose) every chord deviates by less than delta, and
         #      where it lets an edge turn by more than 90 degrees (r < 8 delta / (pi / 2)^2, 0.32
@@ -488,26 +507,33 @@ class InputSurface:
             wseg = np.maximum(0.5 * (cS[mid + 1] - cS[mid - 1]), h_min)
             hc = _edge_size(phi, wseg, delta)
             interior = self.v_kind[cv[mid]] == CHAIN
-            np.minimum.at(h, cv[mid][interior], hc[interior])
+            hcv = np.full(nv, np.inf)
+            np.minimum.at(hcv, cv[mid][interior], hc[interior])
             # (4) short chains: no edge longer than the chain itself around it
             lens = self.ch_len
-            np.minimum.at(h, cv, np.maximum(lens[self.ch_c], h_min))
+            np.minimum.at(hcv, cv, np.maximum(lens[self.ch_c], h_min))
+            h = note(hcv, 3)
         # (5) local feature size: feature lines facing each other at distance d
         lv, ld = self._thin_pairs(self.is_feature_edge, np.zeros(len(E), bool), 0.0,
                                   lfs_radius=0.5 * target)
+        hf = np.full(nv, np.inf)
         if len(lv):
-            np.minimum.at(h, lv, 2.0 * ld)
+            np.minimum.at(hf, lv, 2.0 * ld)
         # (6) dangling line ends (cut wedges, lines fading into a fold): room for
         #     well-shaped triangles around the end
         if len(self.cut_corners):
-            h[self.cut_corners] = np.minimum(h[self.cut_corners], 2.0 * self.w_cut)
+            hf[self.cut_corners] = np.minimum(hf[self.cut_corners], 2.0 * self.w_cut)
+        h = note(hf, 2)
         # (7) the local sizes asked for (members closer than the element size)
         self.field = field
         if field is not None:
-            h = np.minimum(h, field.at(P, target))
-        h = np.minimum(np.clip(h, h_min, target), h_turn)
+            h = note(field.at(P, target), 4)
+        h = np.clip(h, h_min, target)
+        h = note(h_turn, 1)
         # (8) gradation: h_i <= h_j + gradation * |x_i - x_j|  (multi-source Dijkstra)
         self.h = _grade(P, E, h, gradation)
+        why[self.h < h] = 5
+        self.reason = why
         self.h_min = h_min
 
     def field_at(self, x):
@@ -522,9 +548,33 @@ class InputSurface:
         return out
 
     def shrink_sizing(self, verts, hnew, gradation):
+        """Lower the sizing at input vertices ``verts`` to ``hnew`` (not below ``h_min``; the
+        deviation passes: counted as curvature) and grade again."""
         h = self.h.copy()
         np.minimum.at(h, verts, np.maximum(hnew, self.h_min))
-        self.h = _grade(self.P, self.topo.E, h, gradation)
+        self.reason[h < self.h] = 0
+        hg = _grade(self.P, self.topo.E, h, gradation)
+        self.reason[hg < h] = 5
+        self.h = hg
+
+    def sizing_summary(self) -> dict:
+        """The sizing over the input skin in units of the target: ``min``, ``max`` and the
+        area-weighted ``median`` of the local size asked for (the size fields included), and
+        ``refined``: the share of the skin's area where it is below 0.95 of the target, in all
+        and per reason (:data:`SIZING_REASONS`, each vertex counted for the term that set its size)."""
+        va = np.zeros(len(self.P))
+        for col in range(3):
+            va += np.bincount(self.T[:, col], weights=self.tri_area2, minlength=len(self.P))
+        va /= max(float(va.sum()), 1e-300)
+        h = np.minimum(self.h, self.field_at(self.P)) / self.target
+        order = np.argsort(h, kind="stable")
+        med = float(h[order][min(np.searchsorted(np.cumsum(va[order]), 0.5), len(h) - 1)])
+        low = h < 0.95
+        # below 0.95 only by the size fields evaluated anew (graded in space, not along the skin)
+        why = np.where(self.h / self.target < 0.95, self.reason, 5)
+        refined = {r: float(va[low & (why == k)].sum()) for k, r in enumerate(SIZING_REASONS)}
+        return {"min": float(h.min()), "max": float(h.max()), "median": med,
+                "refined": float(va[low].sum()), "refined_by": refined}
 
     def h_at(self, tri, q):
         """Sizing at points q lying on input triangles tri (barycentric interpolation)."""
