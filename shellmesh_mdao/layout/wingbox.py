@@ -221,30 +221,33 @@ class _Box:
             allowed = np.abs(ts[:, None] - J[None, :]).min(axis=1) >= m
         allowed &= (ts - ts[0] >= 2 * m) & (ts[-1] - ts >= 2 * m)
         xs = np.asarray(xs, float)
-        keep, at, kept = [], [], []
-        inner = J[(J >= ts[0] + 2 * m) & (J <= ts[-1] - 2 * m)] if len(J) else J
+        keep, at = [], []
         for c in self.cranks:
             ok = np.flatnonzero(allowed)
             k = int(ok[np.argmin(np.abs(ts[ok] - c))]) if len(ok) else -1
             if k >= 0 and abs(ts[k] - c) <= 2 * m:
                 keep.append(k)
-            elif len(inner):
-                # ribs within a size of every station near the crank: the line may kink where those
-                # ribs meet it (a kink at a junction leaves no short piece), and does at the nearest
-                # on each side of the crank
-                near = inner[np.abs(inner - c) <= 2 * m]
-                at += [float(j) for j in near]
-                kept += [float(near[near <= c].max())] if np.any(near <= c) else []
-                kept += [float(near[near > c].min())] if np.any(near > c) else []
+            elif len(J):
+                # ribs within a size of every station near the crank: the kink goes to the crank, or
+                # as near it as half a size from the nearest rib on each side allows (midway between
+                # them when they are closer than a size); a kink on a rib would leave the rib and the
+                # next piece meeting the spar at one point
+                lo, hi = J[J <= c], J[J > c]
+                lo = float(lo.max()) if len(lo) else -np.inf
+                hi = float(hi.min()) if len(hi) else np.inf
+                g = min(0.5 * m, 0.5 * (hi - lo))
+                tc = float(np.clip(c, lo + g, hi - g))
+                if ts[0] + 2 * m <= tc <= ts[-1] - 2 * m:
+                    at.append(tc)
         if at:
             at = np.unique(at)
             ts = np.concatenate([ts, at])
             xs = np.concatenate([xs, np.interp(at, self.ts, xs)])
-            allowed = np.concatenate([allowed, np.ones(len(at), bool)])
+            allowed = np.concatenate([allowed, np.zeros(len(at), bool)])
             o = np.argsort(ts, kind="stable")
             ts, xs, allowed = ts[o], xs[o], allowed[o]
-            new = np.flatnonzero(o >= len(o) - len(at))
-            keep = [int(np.flatnonzero(o == i)[0]) for i in keep] + [int(i) for i in new if ts[i] in kept]
+            keep = [int(np.flatnonzero(o == i)[0]) for i in keep] + \
+                   [int(i) for i in np.flatnonzero(o >= len(o) - len(at))]
         idx = _simplify(ts, xs, SPAR_TOL * m, keep, allowed, 2 * m)
         return PlanformLine(ts[idx], xs[idx])
 
