@@ -212,8 +212,8 @@ class _Box:
     def straight(self, xs, junctions=()) -> PlanformLine:
         """A spar curve (values at the dense stations) straightened within SPAR_TOL sizes: its
         pieces at least two element sizes long, its kinks at least one size from the
-        ``junctions`` (stations where ribs meet it); a crank station is a kink, or the nearest
-        station allowed."""
+        ``junctions`` (stations where ribs meet it), or midway between two junctions closer than
+        two sizes; a crank station is a kink, or the nearest station allowed."""
         ts, m = self.ts, self.size
         J = np.asarray([j for j in junctions if np.isfinite(j)], float)
         allowed = np.ones(len(ts), bool)
@@ -221,6 +221,21 @@ class _Box:
             allowed = np.abs(ts[:, None] - J[None, :]).min(axis=1) >= m
         allowed &= (ts - ts[0] >= 2 * m) & (ts[-1] - ts >= 2 * m)
         xs = np.asarray(xs, float)
+        if len(J) >= 2:
+            # ribs closer than two sizes leave no station a size from both: the line may kink midway
+            # between two that are at least a size apart (else it runs straight past a planform
+            # that bends there, out of the wing)
+            Js = np.unique(J)
+            mid = 0.5 * (Js[:-1] + Js[1:])
+            free = np.array([not np.any(allowed & (ts > a) & (ts < b)) for a, b in zip(Js[:-1], Js[1:])])
+            mid = mid[free & (np.diff(Js) >= m) & (mid - ts[0] >= 2 * m) & (ts[-1] - mid >= 2 * m)]
+            mid = mid[~np.isin(mid, ts)]
+            if len(mid):
+                x_mid = np.interp(mid, ts, xs)
+                ts, xs = np.concatenate([ts, mid]), np.concatenate([xs, x_mid])
+                allowed = np.concatenate([allowed, np.ones(len(mid), bool)])
+                o = np.argsort(ts, kind="stable")
+                ts, xs, allowed = ts[o], xs[o], allowed[o]
         keep, at = [], []
         for c in self.cranks:
             ok = np.flatnonzero(allowed)
@@ -241,8 +256,8 @@ class _Box:
                     at.append(tc)
         if at:
             at = np.unique(at)
+            xs = np.concatenate([xs, np.interp(at, ts, xs)])
             ts = np.concatenate([ts, at])
-            xs = np.concatenate([xs, np.interp(at, self.ts, xs)])
             allowed = np.concatenate([allowed, np.zeros(len(at), bool)])
             o = np.argsort(ts, kind="stable")
             ts, xs, allowed = ts[o], xs[o], allowed[o]
