@@ -247,18 +247,22 @@ def supersonic_skin(geometry_dir, manifest):
     return load_surface(geometry_dir / manifest["geometries"]["supersonic_wing_body"]["file"])[0]
 
 
-@pytest.mark.parametrize("size", [0.0723668, 0.0752471, 0.07562, 0.076])
-def test_thin_tip_trailing_edge_corner_keeps_no_needle(supersonic_skin, size):
+@pytest.mark.parametrize("size, pinched", [(0.0723668, False), (0.0752471, False), (0.07562, True), (0.076, True)])
+def test_thin_tip_trailing_edge_corner_keeps_no_needle(supersonic_skin, size, pinched):
     """supersonic_wing_body: the sharp trailing edge ends at the tip in a half-round cap whose
     radius falls to 0 there, thinner than max_deviation. The corner was left with three
     neighbours, the trailing edge's next node and one node on each side of the flat cap, and a
     needle between the two (smallest angle 0.0-1.9 degrees at these sizes; at 0.076 the pipeline
     then missed the scaled-Jacobian guarantee) that no edge operation could remove. Collapsing
     several of the corner's neighbours into it at once leaves no triangle below 12 degrees
-    within four sizes of the tip's trailing-edge corners, on a closed manifold skin."""
+    within four sizes of the tip's trailing-edge corners, on a closed manifold skin. At 0.0724
+    and 0.0752 the corner is no longer left pinched since the turning bound asks for no less
+    than min_edge beside the trailing-edge wedge (the cap's fold narrows into it); at 0.0756
+    and 0.076 it still is and the contraction mends it."""
     rep = {}
     out = remesh_skin(supersonic_skin, 2 * size, report=rep)
-    assert rep["n_pinched_contracted"] > 0
+    if pinched:
+        assert rep["n_pinched_contracted"] > 0
     F = out.faces[:, :3]
     corners = np.array([[-4.79848623, 3.0, 0.0], [-4.79848623, -3.0, 0.0]])
     centre = out.points[F].mean(1)

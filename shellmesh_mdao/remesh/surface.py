@@ -16,7 +16,8 @@ from ..core.locator import SurfaceLocator, closest_point_on_triangles
 from ..core.sizefield import SizeField
 from .common import CHAIN, CORNER, EdgeTable, tri_normals
 
-__all__ = ["InputSurface", "project_compatible", "MAX_TURN", "TURN_MIN_EDGE_FRACTION", "SIZING_REASONS"]
+__all__ = ["InputSurface", "project_compatible", "MAX_TURN", "TURN_MIN_EDGE_FRACTION", "WEDGE_DIHEDRAL",
+           "SIZING_REASONS"]
 
 #: why the sizing asks for less than the target at an input vertex (:attr:`InputSurface.reason`,
 #: the remesh report's ``sizing``): the chordal-deviation bound over a kink or the curvature, and
@@ -36,6 +37,13 @@ MAX_TURN = 45.0
 #: ``min_edge``): the bundled wing's 16 mm nose radius at its tip is resolved up to a target edge
 #: of about 0.5 (size 0.25)
 TURN_MIN_EDGE_FRACTION = 0.25
+
+#: within a target edge of a wedge, a crease whose faces meet at a dihedral above this (degrees;
+#: closing to less than 45 degrees, like a sharp trailing edge), the turning bound asks for no less
+#: than ``min_edge``: a fold running into a wedge narrows to no radius there (a round tip's outline
+#: at the trailing edge), and the smaller floor it would ask for beside the crease's chain
+#: (:data:`TURN_MIN_EDGE_FRACTION`, for noses) leaves degenerate slivers
+WEDGE_DIHEDRAL = 135.0
 
 # einsum's dot, its norm and unit rows (mesh.dot_rows & co.: compiled for (k, 3) rows)
 _dot, _norm, _unit = dot_rows, dot_norm_rows, dot_unit_rows
@@ -475,9 +483,14 @@ class InputSurface:
         #      Only folds that run along a line ask, and only the smooth surface's turning counts
         #      (edges up to the feature angle); within a target edge of a sharper edge that the
         #      thin-feature rules dropped (a tip wedge, the creases of a faceted fin) the remesh
-        #      cuts across on purpose and this bound asks nothing. Also evaluated where each
-        #      remesh vertex is, as a size field (:meth:`field_at`): graded from where it asks,
-        #      however coarse the input triangles.
+        #      cuts across on purpose and this bound asks nothing; within a target edge of a
+        #      wedge (a crease sharper than WEDGE_DIHEDRAL: a sharp trailing edge) it asks for no
+        #      less than h_min, the other terms' floor: a fold running into a wedge narrows to no
+        #      radius (a round tip's outline reaching the trailing edge) and would ask for h_turn_min
+        #      beside the crease's chain, where the remesh leaves degenerate slivers (a fold ending
+        #      at a blunter crease, a nose at a tip cap, keeps its radius and asks up to it).
+        #      Also evaluated where each remesh vertex is, as a size field (:meth:`field_at`):
+        #      graded from where it asks, however coarse the input triangles.
         h_turn_min = TURN_MIN_EDGE_FRACTION * h_min
         smooth_e = theta <= np.radians(self.feature_angle)
         h_turn = _turning_size(P, E[sel[smooth_e]], theta[smooth_e], h_turn_min, target, delta,
@@ -486,6 +499,10 @@ class InputSurface:
         if len(dropped):
             near = cKDTree(P[np.unique(E[dropped])]).query(P, distance_upper_bound=target)[0]
             h_turn[np.isfinite(near)] = np.inf
+        wedge = np.flatnonzero(inner & (self.edge_dihedral > WEDGE_DIHEDRAL))
+        if len(wedge):
+            near = np.isfinite(cKDTree(P[np.unique(E[wedge])]).query(P, distance_upper_bound=target)[0])
+            h_turn[near] = np.maximum(h_turn[near], h_min)
         h_turn = np.maximum(h_turn, h_turn_min)
         ask = np.flatnonzero(h_turn < target)
         self.turn_field = (SizeField(P[ask], h_turn[ask], max(gradation, 1e-6))
