@@ -227,8 +227,9 @@ def test_calculix_on_a_station_wing(group_run):
         assert np.abs(m.points[r.clamped, 1]).max() < 1e-6 and fea["tip_deflection"][0] > 0
         # KS per member over all its pieces
         pos = family_index(names, m.component_names)[m.component]
-        vmax = r.von_mises[pos == spar].max()
-        assert vmax <= fea["ks_von_mises"][spar] <= vmax * (1 + np.log((pos == spar).sum()) / 50)
+        mine = (pos == spar) & ~r.in_clamp_band                 # the stress outputs leave out the clamp band
+        vmax = r.von_mises[mine].max()
+        assert vmax <= fea["ks_von_mises"][spar] <= vmax * (1 + np.log(mine.sum()) / 50)
     # the spar's thickness reaches every piece: a thicker spar adds its pieces' area x dt of mass
     fea = p.model.fea
     assert spar in fea._nonempty                          # its finite-difference partials are declared

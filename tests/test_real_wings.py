@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from shellmesh_mdao.benchmarks.real_wings import (LAYOUTS, matrix_cases, run_case, summary_counts, write_page)
+from shellmesh_mdao.benchmarks.real_wings import (DIVISORS, LAYOUTS, matrix_cases, run_case, summary_counts, write_page)
 
 REPO = Path(__file__).resolve().parents[1]
 GEOMETRY = REPO.parent / "shared" / "geometry"
@@ -52,5 +52,5 @@ def test_page_and_counts(tmp_path):
 def test_matrix_cases():
     manifest = {"geometries": {"a": {}, "b": {}}}
     cases = matrix_cases(manifest)
-    assert len(cases) == 2 * 3 * 3 * 2 and cases[0] == ("a", L10, "normal_to_spar", 40)
+    assert len(cases) == 2 * 3 * 3 * len(DIVISORS) and cases[0] == ("a", L10, "normal_to_spar", DIVISORS[0])
     assert matrix_cases(manifest, only=["b"], divisors=[80])[0] == ("b", L10, "normal_to_spar", 80)
