@@ -522,6 +522,71 @@ def flip_round(W, ctx, mode):
 
 
 
+#: a face is degenerate when its height over its longest edge is below this fraction of that edge
+DEGENERATE_HEIGHT = 1e-8
+
+
+def _degenerate_faces(P, F):
+    """Degenerate faces of ``F`` and, for each, the corner (0-2) at the start of its longest edge."""
+    A, B, C = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
+    L = np.stack([_norm(B - A), _norm(C - B), _norm(A - C)], 1)
+    k = np.argmax(L, axis=1)
+    lmax = L[np.arange(len(F)), k]
+    deg = np.flatnonzero(_norm(cross_rows(B - A, C - A)) <= DEGENERATE_HEIGHT * lmax * lmax)
+    return deg, k[deg], lmax[deg]
+
+
+def degenerate_round(W, ctx):
+    """Remove, in one batch, degenerate faces (three nodes in a line, as where the projections of
+    several nodes meet on a crest of the input, a nose tighter than the edges; their normals are
+    not defined, so no round of the sweeps removes them). The longest edge ``ab`` of such a face
+    ``abc`` is flipped with the face ``bad`` across it: the two new faces are ``bad`` split at
+    ``c``. Where ``d`` is on the line too (a flat pocket of two faces), the flip's new edge ``cd``
+    is collapsed after it (the two faces vanish). Feature edges, open edges and flips whose new
+    edge exists already are left. Returns the number of flips."""
+    T = W.topo()
+    F, P = W.F, W.P
+    deg, k, lmax = _degenerate_faces(P, F)
+    if not len(deg):
+        return 0
+    h = 3 * deg + k
+    e = T.he_edge[h]
+    other = np.where(T.h0[e] == h, T.h1[e], T.h0[e])
+    isf, _ = W.feature_lookup(T)
+    g, s = np.maximum(other, 0) // 3, np.maximum(other, 0) % 3
+    a, b, c = F[deg, k], F[deg, (k + 1) % 3], F[deg, (k + 2) % 3]
+    d = F[g, (s + 2) % 3]
+    ok = (other >= 0) & ~isf[e] & (W.fpatch[g] == W.fpatch[deg]) & (c != d)
+    ok &= T.lookup(c, d) < 0
+    sel = np.flatnonzero(ok)
+    if not len(sel):
+        return 0
+    rank = rank_candidates(lmax[sel], deg[sel])
+    win = greedy_independent(np.repeat(np.arange(len(sel)), 2),
+                             np.stack([deg[sel], g[sel]], 1).reshape(-1), rank, len(F))
+    sel = sel[win]
+    lo, hi = np.minimum(c[sel], d[sel]), np.maximum(c[sel], d[sel])
+    o = np.lexsort((hi, lo))
+    first = np.ones(len(o), bool)
+    first[1:] = (lo[o][1:] != lo[o][:-1]) | (hi[o][1:] != hi[o][:-1])
+    sel = sel[np.sort(o[first])]
+    F2 = F.copy()
+    F2[deg[sel]] = np.stack([a[sel], d[sel], c[sel]], 1)
+    F2[g[sel]] = np.stack([d[sel], b[sel], c[sel]], 1)
+    W.F = F2
+    W.touched()
+    # flat pockets: d on the line ab too; the flip's faces are degenerate as well: collapse cd
+    pocket = _norm(cross_rows(P[b[sel]] - P[a[sel]], P[d[sel]] - P[a[sel]])) <= DEGENERATE_HEIGHT * lmax[sel] ** 2
+    if pocket.any():
+        T2 = W.topo()
+        cd = T2.lookup(c[sel][pocket], d[sel][pocket])
+        cd = np.unique(cd[cd >= 0])
+        if len(cd):
+            collapse_edges(W, ctx, T2, cd, prio=-edge_lengths(W.P, T2.E[cd]), max_normal_turn=60.0,
+                           max_len_ratio=4.0)
+    return len(sel)
+
+
 def phase(fn, W, ctx, max_rounds, *args, **kw):
     """Repeat a batched operation until it stalls (fewer than 0.2 % of the faces changed
     per round; the next sweep takes up the rest after relaxation)."""
