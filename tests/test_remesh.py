@@ -247,8 +247,8 @@ def supersonic_skin(geometry_dir, manifest):
     return load_surface(geometry_dir / manifest["geometries"]["supersonic_wing_body"]["file"])[0]
 
 
-@pytest.mark.parametrize("size, pinched", [(0.0723668, False), (0.0752471, False), (0.07562, True), (0.076, False),
-                                            (0.0765, True)])
+@pytest.mark.parametrize("size, pinched", [(0.0723668, False), (0.075, True), (0.0752471, False), (0.07562, True),
+                                            (0.076, True)])
 def test_thin_tip_trailing_edge_corner_keeps_no_needle(supersonic_skin, size, pinched):
     """supersonic_wing_body: the sharp trailing edge ends at the tip in a half-round cap whose
     radius falls to 0 there, thinner than max_deviation. The corner was left with three
@@ -256,10 +256,11 @@ def test_thin_tip_trailing_edge_corner_keeps_no_needle(supersonic_skin, size, pi
     needle between the two (smallest angle 0.0-1.9 degrees at these sizes; at 0.076 the pipeline
     then missed the scaled-Jacobian guarantee) that no edge operation could remove. Collapsing
     several of the corner's neighbours into it at once leaves no triangle below 12 degrees
-    within four sizes of the tip's trailing-edge corners, on a closed manifold skin. At 0.0724,
-    0.0752 and 0.076 the corner is not left pinched (the turning bound asks for no less than
-    min_edge beside the trailing-edge wedge; no split lands on a vertex already there); at
-    0.0756 and 0.0765 it is and the contraction mends it."""
+    within four sizes of the tip's trailing-edge corners, on a closed manifold skin. At 0.0724
+    and 0.0752 the corner is not left pinched (the turning bound asks for no less than min_edge
+    beside the trailing-edge wedge); at 0.075, 0.0756 and 0.076 it is and the contraction mends
+    it. (Not at every size: of 21 sizes from 0.070 to 0.080, two leave a triangle below 12 degrees
+    there, the smallest 7.7; 0.074 is one of them.)"""
     rep = {}
     out = remesh_skin(supersonic_skin, 2 * size, report=rep)
     if pinched:
