@@ -162,7 +162,9 @@ p.driver.add_recorder(om.SqliteRecorder(sys.argv[1]))
 p.setup(distributed_vector_class=OneProcessModelVector) if comm is not None and comm.size > 1 else p.setup()
 p.run_driver()
 p.cleanup()
-print("LOCAL_CASES", p.driver.iter_count)
+# one file per process: two processes' prints to one pipe can interleave within a line
+with open(f"local_cases_{comm.rank if comm is not None else 0}.txt", "w") as f:
+    f.write(str(p.driver.iter_count))
 """
 
 
@@ -205,7 +207,7 @@ def test_doe_case_names_unique_across_ranks(tmp_path):
     r = subprocess.run([*mpi, sys.executable, str(script), "cases.sql"], capture_output=True, text=True, env=env,
                        timeout=300, cwd=tmp_path)
     assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-3000:])
-    assert sorted(int(w.split()[1]) for w in r.stdout.splitlines() if w.startswith("LOCAL_CASES")) == [2, 3]
+    assert sorted(int(f.read_text()) for f in tmp_path.glob("local_cases_*.txt")) == [2, 3]
     files = sorted(tmp_path.rglob("cases.sql_[0-9]"))
     assert len(files) == 2
     meta = next(tmp_path.rglob("cases.sql_meta"))
