@@ -227,7 +227,9 @@ class _Box:
             # that bends there, out of the wing)
             Js = np.unique(J)
             mid = 0.5 * (Js[:-1] + Js[1:])
-            free = np.array([not np.any(allowed & (ts > a) & (ts < b)) for a, b in zip(Js[:-1], Js[1:])])
+            # no allowed station strictly between two neighbouring junctions (ts ascending)
+            cs = np.concatenate([[0], np.cumsum(allowed)])
+            free = cs[np.searchsorted(ts, Js[1:], "left")] == cs[np.searchsorted(ts, Js[:-1], "right")]
             mid = mid[free & (np.diff(Js) >= m) & (mid - ts[0] >= 2 * m) & (ts[-1] - mid >= 2 * m)]
             mid = mid[~np.isin(mid, ts)]
             if len(mid):

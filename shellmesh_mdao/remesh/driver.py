@@ -412,8 +412,7 @@ def remesh_skin(mesh: ShellMesh, target_edge: float, options: RemeshOptions = Re
     n_pinched = _contract_pinched(W, ctx)
     if n_pinched:
         phase(flip_round, W, ctx, 5, "angle")
-    # faces of three nodes in a line, where projections met on a crest of the input tighter than
-    # the edges (random family seed 4, a fin's nose of radius 15 mm: 23 such faces)
+    # faces of three nodes in a line, where nodes met on a crest of the input tighter than the edges
     n_degenerate = 0
     for _ in range(10):
         k = degenerate_round(W, ctx)

@@ -77,8 +77,8 @@ def _across_ridge(ctx, pa, pb, mid, nrm, fn0, patch, pts, tri, ok):
 
 #: a split's new point lands on another vertex when closer to it than this fraction of its scale
 #: (the smaller of its edge's length and the local size asked for): points that coincide (1e-15
-#: apart where projections meet). A larger bound (0.05) also stopped splits the mesh needed:
-#: random family seed 0 then kept 90 elements below scaled Jacobian 0.2 (none at 1e-3)
+#: apart where projections meet); a bound of 0.05 also stops splits the mesh needs (random family
+#: seed 0 then keeps elements below scaled Jacobian 0.2)
 LANDING = 1e-3
 
 
@@ -169,9 +169,8 @@ def split_round(W, ctx, forced=None, min_angle_guard=0.0, deviation=None):
         ok &= (hh < 0) | (_norm(newP - pc) > 0.25 * _norm(mid_all - pc))
     # nor land on another vertex, old or new: a midpoint whose projection jumps (across a nose or a
     # tip corner tighter than the edge) can reach a vertex already there or the landing point of
-    # another split (every point of a convex input vertex's normal cone projects onto it). Random
-    # family seed 4, a fin's leading edge at its tip (radius 15 mm, edges of 19 mm asked for):
-    # 4,836 zero-length edges in one round, then splits feeding on them, 16k -> 376k triangles
+    # another split (every point of a convex input vertex's normal cone projects onto it), and
+    # coincident nodes feed further splits without end (random family seed 4, a fin's 15 mm nose)
     if (~fm).any():
         r = np.flatnonzero(~fm)
         far = [np.where(hh >= 0, W.F[np.maximum(hh, 0) // 3, (np.maximum(hh, 0) % 3 + 2) % 3], a)
