@@ -19,7 +19,7 @@ STAGE_ORDER = ("load", "layout", "project", "remesh", "imprint", "members", "spl
 BELOW_STAGES = ("errors", "mesh", "core", "quality", "families", "options")
 #: modules that drive the stages; no stage and no core helper imports them
 ABOVE_STAGES = ("pipeline", "components", "cli", "study", "benchmarks", "guarantees", "report", "render",
-                "analysis", "config")
+                "analysis", "config", "morph")
 MAX_LINES = 1000
 
 

@@ -21,7 +21,7 @@ TOP_LEVEL = ["run_pipeline", "PipelineOptions", "PipelineResult", "STAGES", "She
              "naca_wing", "naca_wing_layout", "run_study", "__version__"]
 
 COMPONENTS = ["ShellMeshGroup", "MassComp", "CalculixShellAnalysis", "LayoutComp", "ProjectionComp", "ImprintComp",
-              "MemberMeshComp", "SplitComp", "MergeComp", "SmoothComp", "QuadComp"]
+              "MemberMeshComp", "SplitComp", "MergeComp", "SmoothComp", "QuadComp", "MorphComp"]
 
 #: Libraries that take a noticeable part of a second to import; start-up must not pay for them.
 HEAVY = ("numba", "openmdao", "pyvista", "vtk", "matplotlib", "gmsh")

@@ -26,7 +26,7 @@ from ..families import padded_names
 from ..mesh import ShellMesh
 from .layout_comp import family_index, family_names
 
-__all__ = ["MassComp", "discrete_family_names", "mesh_family_positions", "mapped_family_areas"]
+__all__ = ["MassComp", "discrete_family_names", "mesh_family_positions", "mapped_family_areas", "family_areas_at"]
 
 
 class MassComp(om.ExplicitComponent):
@@ -39,6 +39,9 @@ class MassComp(om.ExplicitComponent):
     layout : layout (path, dict, Layout) giving ``family_names`` with ``shell_mesh``.
     thickness : initial thickness of every family (default 0.002, mesh length units).
     density : initial density (default 2700, aluminium, mass per volume in mesh units).
+    coordinates : True: the node coordinates are the input ``x_struct0`` (3 n,) (from a
+        :class:`~shellmesh_mdao.components.morph_comp.MorphComp`), the elements those of the option
+        ``mesh``; the partials with respect to ``x_struct0`` are exact too.
 
     Inputs ``thickness`` (n_families,: :attr:`family_names` order; the mesh's own
     ``component_names`` with the option ``mesh``), ``density`` (scalar); output ``mass`` (scalar).
@@ -54,9 +57,15 @@ class MassComp(om.ExplicitComponent):
         self.options.declare("layout", default=None, desc="layout giving family_names (with shell_mesh)")
         self.options.declare("thickness", default=DEFAULT_THICKNESS, desc="initial thickness of every family")
         self.options.declare("density", default=ANALYSIS_MATERIAL["rho"], desc="initial density")
+        self.options.declare("coordinates", default=False, types=bool,
+                             desc="the node coordinates are the input x_struct0 (the option mesh gives the elements)")
 
     def setup(self):
         mesh = self.options["mesh"]
+        self._coords = bool(self.options["coordinates"])
+        if self._coords and mesh is None:
+            raise ShellMeshError(f"{self.msginfo}: coordinates=True needs the option mesh (the elements whose node "
+                                 "coordinates x_struct0 gives, e.g. MorphReference.mesh)")
         if mesh is not None:
             self.family_names = padded_names(mesh.component_names, n_families(mesh))
             self._areas = family_areas(mesh)
@@ -71,6 +80,13 @@ class MassComp(om.ExplicitComponent):
         self.add_output("mass", val=0.0, desc="mass of all shells")
         self.declare_partials("mass", "thickness")
         self.declare_partials("mass", "density")
+        if self._coords:
+            self.add_input("x_struct0", val=mesh.points.reshape(-1).copy(), shape=(3 * mesh.n_points,),
+                           desc="node coordinates, flattened (x0, y0, z0, x1, ...)")
+            used = np.unique(mesh.faces[mesh.faces >= 0])
+            cols = (3 * used[:, None] + np.arange(3)).reshape(-1)
+            self.declare_partials("mass", "x_struct0", rows=np.zeros(len(cols), np.int64), cols=cols)
+            self._xcols = cols
 
     def _mesh_areas(self, discrete_inputs):
         if self.options["mesh"] is None:
@@ -83,12 +99,56 @@ class MassComp(om.ExplicitComponent):
         return self._areas
 
     def compute(self, inputs, outputs, discrete_inputs=None, discrete_outputs=None):
+        if self._coords:
+            self._areas = family_areas_at(self.options["mesh"], inputs["x_struct0"])[0]
         outputs["mass"] = inputs["density"][0] * (self._mesh_areas(discrete_inputs) @ inputs["thickness"])
 
     def compute_partials(self, inputs, partials, discrete_inputs=None):
+        if self._coords:
+            mesh = self.options["mesh"]
+            self._areas, grad = family_areas_at(mesh, inputs["x_struct0"], inputs["thickness"])
+            partials["mass", "x_struct0"] = inputs["density"][0] * grad.reshape(-1)[self._xcols]
         self._mesh_areas(discrete_inputs)
         partials["mass", "thickness"] = inputs["density"][0] * self._areas[None, :]
         partials["mass", "density"] = self._areas @ inputs["thickness"]
+
+
+def family_areas_at(mesh: ShellMesh, x, weights=None):
+    """Face area of each family of ``mesh`` with its nodes at ``x`` (flattened or (n, 3)), and with
+    ``weights`` (one per family) the gradient (n, 3) of ``sum_f weights[family(f)] * area_f`` with
+    respect to the node coordinates (a quad's area is half the norm of its diagonals' cross product,
+    as :meth:`~shellmesh_mdao.mesh.ShellMesh.face_areas`; a triangle's half its edges')."""
+    P = np.asarray(x)
+    P = P.reshape(-1, 3) if np.iscomplexobj(P) else P.astype(np.float64).reshape(-1, 3)
+    f = mesh.faces
+    tri = f[:, 3] < 0
+    i0, i1, i2 = f[:, 0], f[:, 1], f[:, 2]
+    i3 = np.where(tri, f[:, 0], f[:, 3])
+    # quads: d1 = p2 - p0, d2 = p3 - p1; triangles: d1 = p1 - p0, d2 = p2 - p0
+    d1 = np.where(tri[:, None], P[i1] - P[i0], P[i2] - P[i0])
+    d2 = np.where(tri[:, None], P[i2] - P[i0], P[i3] - P[i1])
+    v = 0.5 * np.cross(d1, d2)
+    area = np.sqrt((v * v).sum(1))          # complex-step safe
+    nf = n_families(mesh)
+    areas = np.zeros(nf, area.dtype)
+    np.add.at(areas, mesh.component, area)
+    if weights is None:
+        return areas, None
+    w = np.asarray(weights, np.float64)[mesh.component]
+    nhat = np.divide(v, area[:, None], out=np.zeros_like(v), where=area[:, None] > 0) * w[:, None]
+    g1 = 0.5 * np.cross(d2, nhat)            # d area / d d1
+    g2 = 0.5 * np.cross(nhat, d1)            # d area / d d2
+    grad = np.zeros_like(P)
+    # quads: d1 = p2 - p0, d2 = p3 - p1; triangles: d1 = p1 - p0, d2 = p2 - p0
+    a_idx = np.where(tri, i1, i2)
+    b_idx = np.where(tri, i2, i3)
+    c_idx = np.where(tri, i0, i1)
+    for d in range(3):
+        grad[:, d] += np.bincount(a_idx, weights=g1[:, d], minlength=len(P))
+        grad[:, d] -= np.bincount(i0, weights=g1[:, d], minlength=len(P))
+        grad[:, d] += np.bincount(b_idx, weights=g2[:, d], minlength=len(P))
+        grad[:, d] -= np.bincount(c_idx, weights=g2[:, d], minlength=len(P))
+    return areas, grad
 
 
 def discrete_family_names(comp, what: str) -> list:
