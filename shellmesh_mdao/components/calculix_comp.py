@@ -20,6 +20,8 @@ faces of each listed family outside the clamp band).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import openmdao.api as om
 
@@ -62,7 +64,10 @@ class CalculixShellAnalysis(om.ExplicitComponent):
     ``ks_rho``, ``ks_ref``, ``thickness`` (initial value), ``ccx`` (executable), ``threads``,
     ``timeout`` (s), ``workdir`` (keep the files there), ``fd_step`` (relative FD step, default 1e-2)
     and ``fd_form`` (default ``"central"``: two ccx runs per family, see ``docs/analysis.md``), ``buckling``
-    (number of buckling factors, default 0: outputs ``buckling_factors`` and ``ks_buckling``).
+    (number of buckling factors, default 0: outputs ``buckling_factors`` and ``ks_buckling``), ``coordinates``
+    (True: the node coordinates are the continuous input ``x_struct0`` of a ``MorphComp``, the elements the
+    option ``mesh``'s; no partials with respect to ``x_struct0``: the layout derivatives of the outputs are
+    finite differences of the whole model, ``model.approx_totals``).
     """
 
     def initialize(self):
@@ -97,6 +102,8 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         o.declare("fd_form", default="central", values=("central", "forward", "backward"),
                   desc="finite-difference form of the thickness partials (central: 2 ccx runs per family)")
         o.declare("buckling", default=0, types=int, desc="number of lowest buckling factors (0: no *BUCKLE step)")
+        o.declare("coordinates", default=False, types=bool,
+                  desc="the node coordinates are the input x_struct0 (the option mesh gives the elements)")
 
     def setup(self):
         o = self.options
@@ -121,6 +128,14 @@ class CalculixShellAnalysis(om.ExplicitComponent):
             n = n_families(mesh)
             self.family_names = padded_names(mesh.component_names, n)
         self.last_result = None
+        if o["coordinates"]:
+            if mesh is None:
+                raise SolverError(f"{self.msginfo}: coordinates=True needs the option mesh (the elements whose node "
+                                  "coordinates x_struct0 gives, e.g. MorphReference.mesh)")
+            # no partials with respect to x_struct0: derivatives with respect to what moves the nodes (the
+            # layout, through MorphComp) are finite differences of the whole model (approx_totals)
+            self.add_input("x_struct0", val=mesh.points.reshape(-1).copy(), shape=(3 * mesh.n_points,),
+                           desc="node coordinates, flattened (x0, y0, z0, x1, ...)")
         self.add_input("thickness", val=np.full(n, float(o["thickness"])), shape=(n,),
                        desc="shell thickness of each family, in family_names order")
         self.add_output("mass", val=0.0, desc="mass of all shells (material rho)")
@@ -167,10 +182,15 @@ class CalculixShellAnalysis(om.ExplicitComponent):
     def compute(self, inputs, outputs, discrete_inputs=None, discrete_outputs=None):
         t = np.array(inputs["thickness"], dtype=np.float64)
         mesh = self.options["mesh"]
+        key = t[self._nonempty].tobytes()          # families without faces do not change the model
         if mesh is None:
             mesh = discrete_inputs["shell_mesh"]
             self._use_mesh(mesh)
-        key = t[self._nonempty].tobytes()          # families without faces do not change the model
+        elif self.options["coordinates"]:
+            x = np.array(inputs["x_struct0"], dtype=np.float64).reshape(-1, 3)
+            key += x.tobytes()
+            if not np.array_equal(x, mesh.points):
+                mesh = dataclasses.replace(mesh, points=x)
         r = self._cache.pop(key, None)
         if r is None:
             if self.options["mesh"] is None:
@@ -183,7 +203,7 @@ class CalculixShellAnalysis(om.ExplicitComponent):
                                               len(self.family_names), rho=float(self.options["ks_rho"]),
                                               ref=self.options["ks_ref"])
             else:
-                r = self._run(t)
+                r = self._run(t, mesh)
         self._cache[key] = r                      # most recent last
         while len(self._cache) > self._cache_size:
             self._cache.pop(next(iter(self._cache)))

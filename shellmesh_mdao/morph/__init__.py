@@ -95,6 +95,7 @@ class MorphReference:
     creases: object = None
     crease_seg: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     crease_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    facing_away: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     def layout_for(self, params: dict) -> Layout:
         """The reference layout with the parameters ``params`` (``{wing: (rib_eta, spar_chord)}``),
@@ -273,7 +274,7 @@ def build_reference(mesh: ShellMesh, lay: Layout, size: float, locator) -> Morph
     ref = MorphReference(mesh=mesh, layout=lay, size=size, locator=locator, wings=out_wings, wing_of=wing_of,
                          kind=kind, planes=planes, r=r, c=c, weight_r=wr, weight_c=wc, tau=tau, mid=mid,
                          skin_normals=nrm, feature=feature, offset=np.zeros((n, 3)), creases=creases,
-                         crease_seg=crease_seg, crease_s=crease_s,
+                         crease_seg=crease_seg, crease_s=crease_s, facing_away=np.zeros(n, bool),
                          member_names=[s.name for s in specs], member_wing=member_wing,
                          rings=vertex_rings(locator))
     # offsets of the skin nodes from the surface where the morph's rule places them
@@ -285,6 +286,10 @@ def build_reference(mesh: ShellMesh, lay: Layout, size: float, locator) -> Morph
         choose_skin(ref, ch, rows, P[rows], pp, pn)
         hit = rows[ch.skin_tri[rows] >= 0]
         ref.offset[hit] = P[hit] - skin_positions(ref, ch, hit, P[hit], pp, pn)
+        # nodes whose ray already meets a triangle facing away at the reference (a face across a nose)
+        ray = hit[~(ref.feature[hit] | ch.closest[hit])]
+        nt = tri_frame(ref, ch.skin_tri[ray])[3]
+        ref.facing_away[ray] = (nt * ref.skin_normals[ray]).sum(1) <= 0
     return ref
 
 
@@ -467,7 +472,8 @@ def morph_check(reference: MorphReference, x, ch=None, plane_points=None, plane_
                 min_sj: float = POOR_JACOBIAN) -> MorphCheck:
     """The checks of a morphed mesh (coordinates ``x``): every element's scaled Jacobian above
     ``min_sj``, moved skin nodes on the input surface (within the gate's tolerance), member nodes on
-    their planes, no moved skin node on an input triangle facing away from its reference normal."""
+    their planes, no moved skin node on an input triangle facing away from its reference normal (unless
+    it did so at the reference already: a face across a nose much tighter than the element)."""
     ref = reference
     sj = element_quality(x, ref.mesh.faces, metrics=("scaled_jacobian",))["scaled_jacobian"]
     diag = ref.mesh.diagonal
@@ -476,7 +482,7 @@ def morph_check(reference: MorphReference, x, ch=None, plane_points=None, plane_
     dist = ref.locator.closest(x[sk])[2] if len(sk) else np.zeros(0)
     flipped = 0
     if ch is not None and len(sk):
-        ray = sk[~(ref.feature[sk] | ch.closest[sk])]
+        ray = sk[~(ref.feature[sk] | ch.closest[sk] | ref.facing_away[sk])]
         _, _, _, nt = tri_frame(ref, np.maximum(ch.skin_tri[ray], 0))
         flipped = int(((nt * ref.skin_normals[ray]).sum(1) <= 0).sum())
     dplane = np.zeros(0)
