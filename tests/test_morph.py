@@ -291,3 +291,37 @@ def test_analysis_on_the_morphed_coordinates_has_layout_derivatives(ref_inner):
         # the faceted input is a kink of the slope) of the largest entry
         tol = 1e-2 if "tip" in key[0] else 2e-2
         assert np.abs(d1 - d2).max() <= tol * np.abs(d1).max(), key
+
+
+def test_each_wing_of_a_two_wing_aircraft_follows_its_own_ribs(geometry_dir, manifest):
+    """The corpus's swept wing pair (right and left wing meeting at the centreline), 10 ribs each: a rib
+    of either wing moved by +-0.02 moves that wing's nodes only (the other wing's nodes stay bit for
+    bit), every member node on its new plane, every element above 0.2."""
+    from shellmesh_mdao.layout import layout_from_manifest
+
+    lay = layout_from_manifest(manifest, "swept_wing", ribs=10, spars=[0.15, 0.65])
+    w = lay.wings[0]
+    size = float(np.linalg.norm(np.asarray(w.tip_le) - np.asarray(w.root_le))) / 40
+    ref = morph_reference(geometry_dir / manifest["geometries"]["swept_wing"]["file"], lay, size)
+    assert [W.name for W in ref.wings] == ["right_wing", "left_wing"]
+    m = ref.mesh
+    for wi, W in enumerate(ref.wings):
+        for d in (0.02, -0.02):
+            p = ref.parameters()
+            eta = p[W.name][0].copy()
+            eta[4] += d
+            p[W.name] = (eta, p[W.name][1])
+            x, chk = morph(ref, p)
+            assert chk.ok, (W.name, d, chk.reason)
+            moved = np.any(x != m.points, axis=1)
+            assert moved.sum() > 100
+            assert (ref.wing_of[moved] == wi).all()
+            specs = {s.name: s for s in ref.layout_for(p).members()}
+            checked = 0
+            for ci, name in enumerate(m.component_names):
+                nodes = np.unique(m.faces[m.component == ci])
+                if name in specs and len(nodes):
+                    dist = np.abs((x[nodes] - specs[name].plane_point) @ specs[name].plane_normal)
+                    assert dist.max() < 1e-9 * m.diagonal, name
+                    checked += 1
+            assert checked >= 20

@@ -213,34 +213,32 @@ def build_reference(mesh: ShellMesh, lay: Layout, size: float, locator) -> Morph
     wing_names = [w.name for w in lay.wings]
     member_wing = np.array([wing_names.index(s.wing) if s.wing in wing_names else -1 for s in specs], np.int64)
     out_wings = []
+    best = np.zeros(n)                     # the largest move weight of a wing at each node so far
+    m0 = planes[:, 0]
     for wi, (W, rk) in enumerate(wings):
         pitch_lo = rk[1] - rk[0] if len(rk) > 1 else 0.0
         pitch_hi = rk[-1] - rk[-2] if len(rk) > 1 else 0.0
         W.r_knots = np.concatenate([[rk[0] - pitch_lo], rk, [rk[-1] + pitch_hi]]) if len(rk) else np.zeros(0)
         W.c_knots = chord_knots(W.spar_chord)
         out_wings.append(W)
-        free = wing_of < 0
-        idx = np.flatnonzero(free)
-        ri, ci, etai = plan_coordinates(W, P[idx])
+        ri, ci, etai = plan_coordinates(W, P)
         base, _ = plan_point(W, ri, ci)
         chord = np.linalg.norm((W.corners[1] - W.corners[0]) + etai[:, None] * (
             (W.corners[3] - W.corners[2]) - (W.corners[1] - W.corners[0])), axis=1)
-        hgt = np.abs((P[idx] - base) @ W.up) / np.maximum(chord, 1e-300)
+        hgt = np.abs((P - base) @ W.up) / np.maximum(chord, 1e-300)
         w_h = np.clip(2.0 - hgt / HEIGHT_FADE, 0.0, 1.0)
         w_c = fade(ci, 0.0, 1.0, CHORD_FADE, CHORD_FADE) * w_h
         w_r = span_fade(W, rk, ri, ci, etai, w_c > 0) * w_h
-        own = np.zeros(len(idx), bool)
-        # member nodes of this wing always follow it; other nodes where a fade is non-zero
-        m0 = planes[idx, 0]
-        own |= (m0 >= 0) & (member_wing[np.maximum(m0, 0)] == wi)
-        own |= (m0 < 0) & ((w_r > 0) | (w_c > 0))
-        own &= ~frozen[idx]
-        sel = idx[own]
-        wing_of[sel] = wi
-        r[sel], c[sel] = ri[own], ci[own]
-        mnode = (m0[own] >= 0)
-        wr[sel] = np.where(mnode, 1.0, w_r[own])
-        wc[sel] = np.where(mnode, 1.0, w_c[own] * w_r[own])
+        # member nodes follow their own wing; any other node the wing that moves it most (a wing's fade
+        # beyond its end ribs does not reach into another wing's box, where that wing's weight is 1)
+        weight = np.where(m0 >= 0, np.where(member_wing[np.maximum(m0, 0)] == wi, 2.0, 0.0), w_r * w_c)
+        own = (weight > best) & ~frozen
+        best = np.maximum(best, np.where(frozen, 0.0, weight))
+        wing_of[own] = wi
+        r[own], c[own] = ri[own], ci[own]
+        mnode = m0[own] >= 0
+        wr[own] = np.where(mnode, 1.0, w_r[own])
+        wc[own] = np.where(mnode, 1.0, w_c[own] * w_r[own])
     # skin normals at the reference (a moved skin node's input triangle must face the same way)
     av = np.where(is_member_face[:, None], 0.0, mesh.face_area_vectors())
     nrm = np.zeros((n, 3))
@@ -418,10 +416,11 @@ def evaluate(ref: MorphReference, params: dict, ch: Choices | None):
     return x, ch, pp, pn
 
 
-def morph(reference: MorphReference, params=None, *, check: bool = True):
+def morph(reference: MorphReference, params=None, *, check: bool = True, min_sj: float = POOR_JACOBIAN):
     """Node coordinates (n, 3) of the reference mesh's elements for the layout parameters ``params``
     (``{wing: (rib_eta, spar_chord)}``, :func:`morph_parameters`; None: the reference's, which gives
-    the reference mesh bit for bit) and the :class:`MorphCheck` (``check``; None without)."""
+    the reference mesh bit for bit) and the :class:`MorphCheck` (``check``; None without; ``min_sj``
+    its scaled Jacobian bound, default the README's 0.2)."""
     params = reference.parameters() if params is None else params
     try:
         x, ch, pp, pn = evaluate(reference, params, None)
@@ -429,7 +428,7 @@ def morph(reference: MorphReference, params=None, *, check: bool = True):
         P = reference.mesh.points.copy()
         return P, (MorphCheck(False, float("nan"), float("nan"), float("nan"), 0, str(e)) if check else None)
     x = np.ascontiguousarray(x.real)
-    return x, (morph_check(reference, x, ch, pp.real, pn.real) if check else None)
+    return x, (morph_check(reference, x, ch, pp.real, pn.real, min_sj=min_sj) if check else None)
 
 
 def morph_jacobian(reference: MorphReference, params=None, wrt=None) -> dict:
