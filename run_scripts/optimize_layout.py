@@ -14,8 +14,9 @@ connection, so OpenMDAO can take total derivatives of the analysis outputs with 
 discrete ``shell_mesh`` connection would make ``compute_totals`` refuse: "depends upon discrete output
 variables").
 Design variables: the interior rib stations (each within 35 % of the rib pitch of its nominal
-station, so ribs never come closer than 30 % of a pitch), both spar chord fractions (0.10-0.25 and
-0.55-0.70) and five thickness groups (``optimize_thickness.py``'s: skin outside the box, upper-skin
+station, so ribs never come closer than 30 % of a pitch), both spar chord fractions (0.14-0.20 and
+0.58-0.66: the box in which the morph of the reference keeps its elements above ``MIN_SJ``; farther moves
+need a new reference) and five thickness groups (``optimize_thickness.py``'s: skin outside the box, upper-skin
 bays, lower-skin bays, spars, ribs; 0.5-10 mm). ``om.ScipyOptimizeDriver(optimizer="SLSQP")`` minimises
 the mass subject to ``ks_von_mises <= --stress-limit`` (every family, outside the clamp band),
 ``ks_buckling <= 1`` (no buckling below the design load) and ``tip_deflection <= --tip-limit``.
@@ -52,6 +53,9 @@ from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.morph import morph_reference
 
 
+#: bounds of the spar chord fractions: the morph of the reference (spars at 0.15 and 0.65) keeps every
+#: element above MIN_SJ at every corner of the design box with the ribs at their bounds (checked at size 0.25)
+SPAR_LOWER, SPAR_UPPER = [0.14, 0.58], [0.20, 0.66]
 #: the optimiser's intermediate meshes (morphs of the reference) may have elements down to this scaled
 #: Jacobian; the final layout is meshed anew by the pipeline (the README's gate, 0.2) and analysed again
 MIN_SJ = 0.1
@@ -83,7 +87,7 @@ def build_problem(size: float = 0.25, ribs: int = 5, t0: float = 0.004, stress_l
     inner = np.arange(1, ribs - 1)
     m.add_design_var("wing:rib_eta", indices=inner, lower=eta[inner] - 0.35 * pitch, upper=eta[inner] + 0.35 * pitch,
                      ref=0.1)
-    m.add_design_var("wing:spar_chord", lower=[0.10, 0.55], upper=[0.25, 0.70], ref=0.1)
+    m.add_design_var("wing:spar_chord", lower=SPAR_LOWER, upper=SPAR_UPPER, ref=0.1)
     m.add_design_var("t_group", lower=0.0005, upper=0.01, ref=1e-3)
     m.add_objective("mass", ref=100.0)
     m.add_constraint("ks_von_mises", upper=stress_limit, ref=stress_limit)

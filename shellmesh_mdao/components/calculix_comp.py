@@ -21,6 +21,7 @@ faces of each listed family outside the clamp band).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 
 import numpy as np
 import openmdao.api as om
@@ -188,7 +189,7 @@ class CalculixShellAnalysis(om.ExplicitComponent):
             self._use_mesh(mesh)
         elif self.options["coordinates"]:
             x = np.array(inputs["x_struct0"], dtype=np.float64).reshape(-1, 3)
-            key += x.tobytes()
+            key += hashlib.sha1(x.tobytes()).digest()
             if not np.array_equal(x, mesh.points):
                 mesh = dataclasses.replace(mesh, points=x)
         r = self._cache.pop(key, None)
