@@ -92,7 +92,8 @@ def main(argv=None) -> int:
                          "tip_deflection": float(p["fea.tip_deflection"][0]),
                          "ks_top": float(p["fea.ks_von_mises"][top]), "max_von_mises": float(p["fea.max_von_mises"][0]),
                          "remeshed": int(p["remeshed"][0]), "morph_seconds": float(p["morph_seconds"][0]),
-                         "case_seconds": time.perf_counter() - t, "min_scaled_jacobian": float(p["min_scaled_jacobian"][0])})
+                         "case_seconds": time.perf_counter() - t,
+                         "min_scaled_jacobian": float(p["min_scaled_jacobian"][0])})
             print(f"{label} {d:+.4f}: mass {rows[-1]['mass']:.4f} kg, tip {1e3 * rows[-1]['tip_deflection']:.3f} mm, "
                   f"KS {1e-6 * rows[-1]['ks_top']:.2f} MPa, morph {rows[-1]['morph_seconds']:.3f} s, "
                   f"case {rows[-1]['case_seconds']:.1f} s, remeshed {rows[-1]['remeshed']}", flush=True)
@@ -123,7 +124,8 @@ def main(argv=None) -> int:
     for label, sw in summary["sweeps"].items():
         figs = ", ".join(f"{k} {v:.2f}" for k, v in sw["smoothness"].items())
         print(f"{label} sweep ({sw['input']}): largest neighbour change / trend per step: {figs}; "
-              f"remeshed {sw['remeshed']} of {len(sw['rows'])}; morph {100 * sw['morph_share_of_case']:.1f} % of a case")
+              f"remeshed {sw['remeshed']} of {len(sw['rows'])}; "
+              f"morph {100 * sw['morph_share_of_case']:.1f} % of a case")
     return 0
 
 

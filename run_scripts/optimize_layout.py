@@ -49,6 +49,7 @@ from optimize_thickness import GROUPS, ThicknessMap, group_matrix
 from shellmesh_mdao.analysis import analyse_shell
 from shellmesh_mdao.components import CalculixShellAnalysis, MassComp, MorphComp
 from shellmesh_mdao.components.layout_comp import family_names
+from shellmesh_mdao.errors import ShellMeshError
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout
 from shellmesh_mdao.morph import morph_reference
 
@@ -129,15 +130,19 @@ def main(argv=None) -> int:
                                                 "wing:spar_chord", "t_group", "buckling_factors")}
     opt["ks_max"] = float(prob.get_val("ks_von_mises").max())
     # the final layout meshed anew by the pipeline (its gate on) and analysed with the optimal thicknesses
-    final = ref.remesh({"wing": (np.asarray(opt["wing:rib_eta"]), np.asarray(opt["wing:spar_chord"]))})
-    t_fam = dict(zip(ref.mesh.component_names, map(float, prob.get_val("thickness"))))
-    check = analyse_shell(final.mesh, t_fam, layout=ref.layout, clamp="root",
-                          pressure=1.0e4, buckling=2)
-    fresh = {"n_elements": int(final.mesh.n_faces), "min_scaled_jacobian":
-             float(final.report["guarantees"]["min_scaled_jacobian"]), "mass": float(check.mass),
-             "ks_max": float(np.max(check.ks_von_mises)), "ks_buckling": float(check.ks_buckling),
-             "tip_deflection": float(check.tip_deflection), "buckling_factors": check.buckling_factors.tolist()}
-    summary = {"success": bool(res.success), "fresh_mesh_of_the_optimum": fresh, "iterations": int(prob.driver.iter_count), "seconds": round(seconds, 1),
+    try:
+        final = ref.remesh({"wing": (np.asarray(opt["wing:rib_eta"]), np.asarray(opt["wing:spar_chord"]))})
+        t_fam = dict(zip(ref.mesh.component_names, map(float, prob.get_val("thickness"))))
+        check = analyse_shell(final.mesh, t_fam, layout=ref.layout, clamp="root", pressure=1.0e4, buckling=2)
+        fresh = {"n_elements": int(final.mesh.n_faces),
+                 "min_scaled_jacobian": float(final.report["guarantees"]["min_scaled_jacobian"]),
+                 "mass": float(check.mass), "ks_max": float(np.max(check.ks_von_mises)),
+                 "ks_buckling": float(check.ks_buckling), "tip_deflection": float(check.tip_deflection),
+                 "buckling_factors": check.buckling_factors.tolist()}
+    except ShellMeshError as e:
+        fresh = {"error": f"{type(e).__name__}: {e}"}
+    summary = {"success": bool(res.success), "fresh_mesh_of_the_optimum": fresh,
+               "iterations": int(prob.driver.iter_count), "seconds": round(seconds, 1),
                "n_elements": int(ref.mesh.n_faces), "stress_limit": args.stress_limit, "tip_limit": args.tip_limit,
                "groups": list(GROUPS), "start": start, "optimum": opt}
     (out / "optimize_layout_summary.json").write_text(json.dumps(summary, indent=1) + "\n")
@@ -191,13 +196,18 @@ def main(argv=None) -> int:
           f"{', '.join(f'{b:.2f}' for b in opt['buckling_factors'])})")
     print(f"tip deflection:   {start['tip_deflection'][0] * 1e3:.1f} -> {opt['tip_deflection'][0] * 1e3:.1f} mm "
           f"(limit {args.tip_limit * 1e3:g})")
-    print(f"rib stations:     {np.round(start['wing:rib_eta'], 3).tolist()} -> {np.round(opt['wing:rib_eta'], 3).tolist()}")
+    print(f"rib stations:     {np.round(start['wing:rib_eta'], 3).tolist()} -> "
+          f"{np.round(opt['wing:rib_eta'], 3).tolist()}")
     print(f"spar fractions:   {np.round(start['wing:spar_chord'], 3).tolist()} -> "
           f"{np.round(opt['wing:spar_chord'], 3).tolist()}")
     print("thickness [mm]:   " + ", ".join(f"{g} {t * 1e3:.2f}" for g, t in zip(GROUPS, opt["t_group"])))
-    print(f"a new mesh of the optimum ({fresh['n_elements']} elements, min scaled Jacobian "
-          f"{fresh['min_scaled_jacobian']:.3f}): mass {fresh['mass']:.2f} kg, max KS {fresh['ks_max'] * 1e-6:.1f} MPa, "
-          f"KS buckling {fresh['ks_buckling']:.3f}, tip deflection {fresh['tip_deflection'] * 1e3:.1f} mm")
+    if "error" in fresh:
+        print(f"a new mesh of the optimum failed: {fresh['error']}")
+    else:
+        print(f"a new mesh of the optimum ({fresh['n_elements']} elements, min scaled Jacobian "
+              f"{fresh['min_scaled_jacobian']:.3f}): mass {fresh['mass']:.2f} kg, max KS "
+              f"{fresh['ks_max'] * 1e-6:.1f} MPa, KS buckling {fresh['ks_buckling']:.3f}, tip deflection "
+              f"{fresh['tip_deflection'] * 1e3:.1f} mm")
     return 0 if res.success else 1
 
 

@@ -10,26 +10,31 @@ the same arithmetic, the choices of input triangles held). The rules (docs/openm
 * **Planform map.** Each wing has plan coordinates ``(r, c)``: ``r = n_rib . x`` (every rib plane is
   ``r = r_k``) and ``c`` the chord fraction of the reference surface ``S(eta, c)`` (every spar plane
   is ``c = c_j``), ``x`` projected along the wing's ``up``. A layout change moves the knots ``r_k``,
-  ``c_j``; a node moves to ``r' = r + w_c(c) * D_r(r)``, ``c' = c + w_r(r) * D_c(c)``, ``D_r``,
-  ``D_c`` the piecewise-linear interpolations of the knots' moves (zero at the wing's ends beyond
-  the end ribs, at the leading and the trailing edge), ``w_c``, ``w_r``, ``w_h`` weights that fade the
-  move out over a quarter chord beyond the leading and trailing edges, over one rib pitch beyond
-  the end ribs, and between a quarter and half a chord above or below the reference surface (a
-  body the wing passes through stays where it is). The node's displacement is
-  ``S(eta(r', c'), c') - S(eta(r, c), c)``: a rib's nodes land in its new plane, a spar's in its.
-* **Skin nodes** go to the closest point of the input surface from there (on the input triangle,
-  edge or vertex it falls on); skin nodes of a member (its chain on the skin) then slide on that
-  triangle's plane into their member's new plane, nodes of two members onto both planes.
+  ``c_j``; a node moves to ``r' = r + w_c w_r D_r(r)``, ``c' = c + w_r D_c(c)``, ``D_r``, ``D_c`` the
+  piecewise-linear interpolations of the knots' moves (``D_c`` zero from the leading edge to halfway
+  to the first spar and from halfway after the last spar to the trailing edge), ``w_c``, ``w_r`` weights
+  that fade the move out over a quarter chord beyond the leading and trailing edges, over one rib
+  pitch beyond the end ribs (the last quarter of the way to the wing's root or tip stays: its end
+  caps do not move), and between a quarter and half a chord above or below the reference surface (a
+  body the wing passes through stays where it is). A node follows the wing that moves it most. Its
+  displacement is ``S(eta(r', c'), c') - S(eta(r, c), c)``: a rib's nodes land in its new plane, a
+  spar's in its.
+* **Skin nodes** go along their reference normal onto the input surface (the triangle decided in
+  float64 among those around the ray's hit); nodes of the input's creases slide along the crease by
+  the move's component along it (:class:`~shellmesh_mdao.morph.creases.Creases`); a member's skin
+  nodes then slide on their triangle's plane (or crease) into their member's new plane, nodes of two
+  members onto both. Every skin node keeps its offset from where this rule puts it at the reference
+  (the quad stage's planarize moves some off the input on purpose).
 * **Member nodes** (off the skin) keep their relative height between the skins below and above
   them: at the new plan point, the heights of the input surface along ``-up`` and ``+up`` (ray casts
   from the section's middle) bound them at the same fraction; then they are projected onto their
   member's plane (onto the line of their two members' planes).
 * Nodes whose move is zero keep their coordinates bit for bit: the reference layout gives the
-  reference mesh.
+  reference mesh, and the morph is continuous there.
 
 The morphed mesh is checked (:func:`morph_check`: scaled Jacobian of every element above 0.2, skin
-nodes on the input surface, member nodes on their planes, the input triangle of every moved skin
-node facing the same way as at the reference); a caller that gets a failed check builds a new
+nodes no farther from the input than at the reference, member nodes on their planes, no moved skin
+node on an input triangle facing away from its side); a caller that gets a failed check builds a new
 mesh instead (:class:`~shellmesh_mdao.components.morph_comp.MorphComp` does, and records it).
 
 Supported: corner-given wings (root/tip corners, ``ribs``, ``spars``). A layout with station-given
@@ -470,8 +475,9 @@ def morph_jacobian(reference: MorphReference, params=None, wrt=None) -> dict:
 def morph_check(reference: MorphReference, x, ch=None, plane_points=None, plane_normals=None,
                 min_sj: float = POOR_JACOBIAN) -> MorphCheck:
     """The checks of a morphed mesh (coordinates ``x``): every element's scaled Jacobian above
-    ``min_sj``, moved skin nodes on the input surface (within the gate's tolerance), member nodes on
-    their planes, no moved skin node on an input triangle facing away from its reference normal (unless
+    ``min_sj``, moved skin nodes no farther from the input surface than their offset at the reference
+    (0 but for planarize's nodes; plus the gate's tolerance), member nodes on their planes (within 1e-7
+    of the model's size), no moved skin node on an input triangle facing away from its reference normal (unless
     it did so at the reference already: a face across a nose much tighter than the element)."""
     ref = reference
     sj = element_quality(x, ref.mesh.faces, metrics=("scaled_jacobian",))["scaled_jacobian"]
