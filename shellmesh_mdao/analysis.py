@@ -51,7 +51,8 @@ from .mesh import ShellMesh
 
 __all__ = [
     "ANALYSIS_MATERIAL", "ELEMENT_TYPES", "CCX_INSTALL_HINT", "LOWER_SKIN_PATTERN", "DatResults", "ShellAnalysis",
-    "find_ccx", "n_families", "family_areas", "shell_mass", "family_ids", "clamped_nodes", "layout_up", "resolve_up",
+    "find_ccx", "n_families", "family_areas", "family_areas_at", "shell_mass", "family_ids", "clamped_nodes",
+    "layout_up", "resolve_up",
     "select_tip_nodes", "clamp_band_faces", "CLAMP_BAND_FRACTION", "BUCKLE_LOAD_SCALE", "BUCKLE_ACCURACY", "von_mises",
     "ks_aggregate", "write_deck", "run_ccx", "read_dat", "analyse_shell",
 ]
@@ -96,6 +97,44 @@ def n_families(mesh: ShellMesh) -> int:
 def family_areas(mesh: ShellMesh) -> np.ndarray:
     """(n_families,) total face area of each component family (0 for a family without faces)."""
     return np.bincount(mesh.component, weights=mesh.face_areas(), minlength=n_families(mesh)).astype(np.float64)
+
+
+def family_areas_at(mesh: ShellMesh, x, weights=None):
+    """Face area of each family of ``mesh`` with its nodes at ``x`` (flattened or (n, 3)), and with
+    ``weights`` (one per family) the gradient (n, 3) of ``sum_f weights[family(f)] * area_f`` with
+    respect to the node coordinates (a quad's area is half the norm of its diagonals' cross product,
+    as :meth:`~shellmesh_mdao.mesh.ShellMesh.face_areas`; a triangle's half its edges')."""
+    P = np.asarray(x)
+    P = P.reshape(-1, 3) if np.iscomplexobj(P) else P.astype(np.float64).reshape(-1, 3)
+    f = mesh.faces
+    tri = f[:, 3] < 0
+    i0, i1, i2 = f[:, 0], f[:, 1], f[:, 2]
+    i3 = np.where(tri, f[:, 0], f[:, 3])
+    # quads: d1 = p2 - p0, d2 = p3 - p1; triangles: d1 = p1 - p0, d2 = p2 - p0
+    d1 = np.where(tri[:, None], P[i1] - P[i0], P[i2] - P[i0])
+    d2 = np.where(tri[:, None], P[i2] - P[i0], P[i3] - P[i1])
+    v = 0.5 * np.cross(d1, d2)
+    area = np.sqrt((v * v).sum(1))          # complex-step safe
+    nf = n_families(mesh)
+    areas = np.zeros(nf, area.dtype)
+    np.add.at(areas, mesh.component, area)
+    if weights is None:
+        return areas, None
+    w = np.asarray(weights, np.float64)[mesh.component]
+    nhat = np.divide(v, area[:, None], out=np.zeros_like(v), where=area[:, None] > 0) * w[:, None]
+    g1 = 0.5 * np.cross(d2, nhat)            # d area / d d1
+    g2 = 0.5 * np.cross(nhat, d1)            # d area / d d2
+    grad = np.zeros_like(P)
+    # quads: d1 = p2 - p0, d2 = p3 - p1; triangles: d1 = p1 - p0, d2 = p2 - p0
+    a_idx = np.where(tri, i1, i2)
+    b_idx = np.where(tri, i2, i3)
+    c_idx = np.where(tri, i0, i1)
+    for d in range(3):
+        grad[:, d] += np.bincount(a_idx, weights=g1[:, d], minlength=len(P))
+        grad[:, d] -= np.bincount(i0, weights=g1[:, d], minlength=len(P))
+        grad[:, d] += np.bincount(b_idx, weights=g2[:, d], minlength=len(P))
+        grad[:, d] -= np.bincount(c_idx, weights=g2[:, d], minlength=len(P))
+    return areas, grad
 
 
 def shell_mass(mesh: ShellMesh, thickness, density: float) -> float:

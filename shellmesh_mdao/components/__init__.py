@@ -5,8 +5,8 @@ Stage components, each calling the pipeline stage of the same name (:mod:`shellm
 (imprint_comp.py: remesh + imprint), ``MemberMeshComp`` (member_mesh_comp.py), ``SplitComp``,
 ``MergeComp``, ``SmoothComp``, ``QuadComp``; ``ShellMeshGroup`` (group.py) wires them in order.
 Layout changes with the connectivity kept: ``MorphComp`` (morph_comp.py: ``x_struct0`` with exact
-partials, :mod:`shellmesh_mdao.morph`). Analysis: ``MassComp`` (mass_comp.py) and ``CalculixShellAnalysis`` (calculix_comp.py) wrap
-:mod:`shellmesh_mdao.analysis` (docs/analysis.md).
+partials, :mod:`shellmesh_mdao.morph`). Analysis: ``MassComp`` (mass_comp.py) and ``CalculixShellAnalysis``
+(calculix_comp.py) wrap :mod:`shellmesh_mdao.analysis` (docs/analysis.md).
 """
 from .calculix_comp import CalculixShellAnalysis
 from .group import ShellMeshGroup

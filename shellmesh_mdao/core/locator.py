@@ -132,8 +132,9 @@ class SurfaceLocator:
             self._embree = scene
         return self._embree
 
-    def _vertex_triangles(self):
-        """CSR vertex -> incident triangles."""
+    def vertex_triangles(self):
+        """CSR vertex -> incident triangles: ``(ptr, triangles)``, the triangles around vertex ``v`` being
+        ``triangles[ptr[v]:ptr[v + 1]]`` (built on first use)."""
         if self._v2t is None:
             t = self.triangles
             v = t.reshape(-1)
@@ -214,7 +215,7 @@ class SurfaceLocator:
         pts = np.empty_like(o)
         bad = np.flatnonzero(~ok | near)
         if len(bad):
-            ptr, v2t = self._vertex_triangles()
+            ptr, v2t = self.vertex_triangles()
             corners = T[prim[bad]]                                   # (b, 3)
             cnt = ptr[corners + 1] - ptr[corners]                    # (b, 3)
             tot = cnt.sum(1)

@@ -54,7 +54,7 @@ from ..mesh import ShellMesh
 from ..quality import element_quality
 from .creases import CREASE_ANGLE, Creases
 from .place import CHAIN_NODE, MEMBER_NODE, SIDE_STEP, SKIN_NODE, Choices, NoSkinError, choose_skin, \
-    member_rays, onto_planes, side_choices, skin_heights, skin_positions, tri_frame, vertex_rings
+    member_rays, onto_planes, side_choices, skin_heights, skin_positions, tri_frame
 from .plan import CHORD_FADE, END_STILL, HEIGHT_FADE, WingFrame, chord_knots, dot, fade, hat_interp, \
     plan_coordinates, plan_point, rib_knots_and_planes, span_fade
 
@@ -279,7 +279,7 @@ def build_reference(mesh: ShellMesh, lay: Layout, size: float, locator) -> Morph
                          skin_normals=nrm, feature=feature, offset=np.zeros((n, 3)), creases=creases,
                          crease_seg=crease_seg, crease_s=crease_s, facing_away=np.zeros(n, bool),
                          member_names=[s.name for s in specs], member_wing=member_wing,
-                         rings=vertex_rings(locator))
+                         rings=locator.vertex_triangles())
     # offsets of the skin nodes from the surface where the morph's rule places them
     rows = np.flatnonzero((wing_of >= 0) & (kind != MEMBER_NODE))
     if len(rows):

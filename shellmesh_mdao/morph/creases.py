@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.polyline import closest_on_segments
 from ..mesh import ShellMesh
 from .plan import dot
 
@@ -58,22 +59,10 @@ class Creases:
         rows = np.flatnonzero(which)
         if not len(rows) or not len(self.a):
             return seg, s
-        from scipy.spatial import cKDTree
-
-        k = min(16, len(self.a))
-        _, cand = cKDTree(0.5 * (self.a + self.b)).query(x[rows], k=k)
-        cand = np.asarray(cand).reshape(len(rows), k)
-        owner = np.repeat(np.arange(len(rows)), k)
-        c = cand.reshape(-1)
-        d = self.b[c] - self.a[c]
-        t = np.clip(dot(x[rows][owner] - self.a[c], d) / np.maximum(dot(d, d), 1e-300), 0.0, 1.0)
-        dist = np.linalg.norm(self.a[c] + t[:, None] * d - x[rows][owner], axis=1)
-        o = np.lexsort((c, dist, owner))
-        pick = o[np.r_[True, owner[o][1:] != owner[o][:-1]]]
-        ok = dist[pick] <= tol
-        r = rows[owner[pick]][ok]
-        seg[r] = c[pick][ok]
-        s[r] = self.s0[c[pick][ok]] + t[pick][ok] * self.seg_len[c[pick][ok]]
+        _, dist, c, t = closest_on_segments(x[rows], self.a, self.b, full=True)
+        ok = dist <= tol
+        seg[rows[ok]] = c[ok]
+        s[rows[ok]] = self.s0[c[ok]] + t[ok] * self.seg_len[c[ok]]
         return seg, s
 
     def segment_at(self, line, s):

@@ -12,7 +12,7 @@ from ..errors import ShellMeshError
 from .plan import dot
 
 __all__ = ["Choices", "NoSkinError", "tri_frame", "regions", "constrain", "skin_positions", "crease_positions",
-           "surface_positions", "onto_planes", "on_surface", "member_rays", "vertex_rings", "refine_hits",
+           "surface_positions", "onto_planes", "on_surface", "member_rays", "refine_hits",
            "choose_skin", "side_choices", "skin_heights", "SKIN_NODE", "CHAIN_NODE", "MEMBER_NODE", "SIDE_STEP",
            "EDGE_TOL"]
 
@@ -200,15 +200,6 @@ def member_rays(ref, o, up):
     _, hi, _ = ref.locator.raycast(o, dirs)
     _, lo, _ = ref.locator.raycast(o, -dirs)
     return refine_hits(ref, o, dirs, lo), refine_hits(ref, o, dirs, hi)
-
-
-def vertex_rings(locator):
-    """CSR of the input triangles around each input vertex: ``(ptr, tris)``."""
-    T = locator.triangles
-    order = np.argsort(T.reshape(-1), kind="stable")
-    counts = np.bincount(T.reshape(-1), minlength=len(locator.points))
-    ptr = np.concatenate([[0], np.cumsum(counts)])
-    return ptr, (order // 3).astype(np.int64)
 
 
 def refine_hits(ref, o, d, tri):
