@@ -3,6 +3,7 @@
     python run_scripts/doe_rib_sweep.py                          # Latin hypercube, 8 cases (~1-2 min)
     python run_scripts/doe_rib_sweep.py --generator ff --levels 2   # full factorial, 2^3 = 8 cases
     mpirun -n 2 python run_scripts/doe_rib_sweep.py --parallel      # the same cases on 2 processes
+    python run_scripts/doe_rib_sweep.py --morph --size 0.1          # every case a morph of one mesh
     # as root add:  --allow-run-as-root --oversubscribe  (or OMPI_ALLOW_RUN_AS_ROOT=1
     #                                                    OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1)
 
@@ -20,6 +21,12 @@ cannot be meshed is recorded with ``success = 0`` (``om.AnalysisError``) and lef
 plot. Writes ``doe_summary.json`` (every case, sorted by design point, so a serial and a
 parallel run can be compared line by line) and ``doe_rib_sweep.png`` (mass, max von Mises
 stress and tip deflection against each design variable) and prints a table.
+
+With ``--morph`` the mesh stage is a :class:`~shellmesh_mdao.components.morph_comp.MorphComp`
+instead: the default layout is meshed once (the reference) and every case moves its nodes to the
+case's rib stations and spar fractions (connectivity unchanged; a new mesh only where the morphed
+mesh misses its checks, recorded as ``remeshed``). Each case records ``morph_seconds`` (its meshing
+time) and ``ccx_seconds`` (its solver time); the summary gives their ratio per case.
 
 Every process uses one thread (OMP/OpenBLAS), set before numpy is imported: the parallel
 cases then run with exactly the arithmetic of the serial ones and give identical results.
@@ -42,40 +49,53 @@ import openmdao.api as om  # noqa: E402
 
 from shellmesh_mdao.components.calculix_comp import CalculixShellAnalysis  # noqa: E402
 from shellmesh_mdao.components.group import DOEDriver, OneProcessModelVector, ShellMeshGroup  # noqa: E402
+from shellmesh_mdao.components.morph_comp import MorphComp  # noqa: E402
 from shellmesh_mdao.geometry import naca_wing, naca_wing_layout  # noqa: E402
+from shellmesh_mdao.morph import morph_reference  # noqa: E402
 
 #: Continuous outputs recorded for every case (besides the design variables).
-RESPONSES = ("mass", "max_von_mises", "tip_deflection", "n_nodes", "n_elements", "min_scaled_jacobian")
+RESPONSES = ("mass", "max_von_mises", "tip_deflection", "n_nodes", "n_elements", "min_scaled_jacobian",
+             "ccx_seconds")
+#: ... and with --morph
+MORPH_RESPONSES = ("remeshed", "morph_seconds")
 SPAR_BOUNDS = ((0.10, 0.25), (0.55, 0.70))
 
 
-def design_variables(ribs: int) -> list:
+def design_variables(ribs: int, scale: float = 1.0) -> list:
     """``[(name, indices, lower, upper, labels)]``: the interior rib stations (each within 40 % of
-    the rib pitch around its nominal station) and the two spar chord fractions."""
+    the rib pitch around its nominal station) and the two spar chord fractions (``SPAR_BOUNDS``
+    around the default layout's 0.15 and 0.65); ``scale`` shrinks every range towards the default
+    layout (1: the full ranges)."""
     nominal = np.linspace(0.0, 1.0, ribs)
     out = []
     if ribs > 2:
         idx = np.arange(1, ribs - 1)
-        half = 0.4 / (ribs - 1)
+        half = scale * 0.4 / (ribs - 1)
         out.append(("wing:rib_eta", idx, nominal[idx] - half, nominal[idx] + half,
                     [f"rib_eta[{i}]" for i in idx]))
-    out.append(("wing:spar_chord", np.arange(2), np.array([b[0] for b in SPAR_BOUNDS]),
-                np.array([b[1] for b in SPAR_BOUNDS]), ["spar_chord[0]", "spar_chord[1]"]))
+    spars = np.asarray(naca_wing_layout(ribs=max(ribs, 2))["wings"][0]["spars"]["chord_fractions"], float)
+    lo = spars + scale * (np.array([b[0] for b in SPAR_BOUNDS]) - spars)
+    hi = spars + scale * (np.array([b[1] for b in SPAR_BOUNDS]) - spars)
+    out.append(("wing:spar_chord", np.arange(2), lo, hi, ["spar_chord[0]", "spar_chord[1]"]))
     return out
 
 
 def build_problem(size: float = 0.25, ribs: int = 3, thickness: float = 0.003, remesh_cache: bool = True,
-                  comm=None, name: str = "doe_rib_sweep") -> om.Problem:
-    """The model: ShellMeshGroup (coarse default wing, ``ribs`` ribs, 2 spars) -> CalculiX."""
+                  comm=None, name: str = "doe_rib_sweep", morph: bool = False, scale: float = 1.0) -> om.Problem:
+    """The model: ShellMeshGroup (coarse default wing, ``ribs`` ribs, 2 spars), or with ``morph`` a
+    MorphComp on a reference mesh of the default layout, -> CalculiX."""
     layout = naca_wing_layout(ribs=ribs)
     surface = naca_wing(n_chord=24, n_span=16)
     prob = om.Problem(comm=comm, reports=False, name=name)
-    prob.model.add_subsystem("mesh", ShellMeshGroup(surface=surface, layout=layout, size=size,
-                                                    remesh_cache=remesh_cache), promotes=["*"])
+    if morph:
+        prob.model.add_subsystem("mesh", MorphComp(reference=morph_reference(surface, layout, size)), promotes=["*"])
+    else:
+        prob.model.add_subsystem("mesh", ShellMeshGroup(surface=surface, layout=layout, size=size,
+                                                        remesh_cache=remesh_cache), promotes=["*"])
     prob.model.add_subsystem("fea", CalculixShellAnalysis(layout=layout, thickness=thickness, pressure=1.0e4),
                              promotes_inputs=["shell_mesh"],
-                             promotes_outputs=["mass", "max_von_mises", "tip_deflection"])
-    for dv_name, idx, lo, hi, _ in design_variables(ribs):
+                             promotes_outputs=["mass", "max_von_mises", "tip_deflection", "ccx_seconds"])
+    for dv_name, idx, lo, hi, _ in design_variables(ribs, scale):
         prob.model.add_design_var(dv_name, indices=idx, lower=lo, upper=hi)
     prob.model.add_objective("mass")
     return prob
@@ -109,7 +129,7 @@ def read_cases(db) -> list:
             c = cr.get_case(cname)
             row = {"success": bool(c.success), "msg": (c.msg or "").strip().splitlines()[-1:] or [""]}
             row["msg"] = row["msg"][0]
-            for key in ("wing:rib_eta", "wing:spar_chord") + RESPONSES:
+            for key in ("wing:rib_eta", "wing:spar_chord") + RESPONSES + MORPH_RESPONSES:
                 try:
                     row[key] = np.asarray(c.get_val(key), dtype=float).ravel().tolist()
                 except KeyError:
@@ -183,10 +203,17 @@ def main(argv=None) -> int:
     ap.add_argument("--thickness", type=float, default=0.003, help="shell thickness of every family (m)")
     ap.add_argument("--parallel", action="store_true", help="run the cases in parallel under mpirun (mpi4py)")
     ap.add_argument("--no-remesh-cache", action="store_true", help="remesh the skin in every case (timing)")
+    ap.add_argument("--scale", type=float, default=1.0,
+                    help="shrink every design range towards the default layout by this factor (default 1)")
+    ap.add_argument("--morph", action="store_true",
+                    help="mesh the default layout once and morph it to every case (MorphComp)")
     ap.add_argument("--out-dir", default="study_out/doe_rib_sweep", help="output folder (default: %(default)s)")
     ap.add_argument("--no-plot", action="store_true", help="no matplotlib picture")
     args = ap.parse_args(argv)
 
+    if not 0.0 < args.scale <= 1.0:
+        print(f"--scale must be in (0, 1] (a share of the full design ranges), got {args.scale}", file=sys.stderr)
+        return 2
     from openmdao.utils.mpi import MPI
 
     comm = MPI.COMM_WORLD if MPI is not None else None
@@ -211,12 +238,12 @@ def main(argv=None) -> int:
         comm.barrier()
 
     prob = build_problem(args.size, args.ribs, args.thickness, remesh_cache=not args.no_remesh_cache,
-                         comm=comm)
+                         comm=comm, morph=args.morph, scale=args.scale)
     driver = prob.driver = DOEDriver(make_generator(args.generator, args.cases, args.levels, args.seed))
     if args.parallel:
         driver.options["run_parallel"] = True
         driver.options["procs_per_model"] = 1
-    driver.recording_options["includes"] = list(RESPONSES)
+    driver.recording_options["includes"] = list(RESPONSES + (MORPH_RESPONSES if args.morph else ()))
     driver.add_recorder(om.SqliteRecorder(str(db)))
     if args.parallel:
         # each case runs on a one-process model (procs_per_model=1): no distributed vectors are
@@ -228,7 +255,7 @@ def main(argv=None) -> int:
     prob.run_driver()
     wall = time.perf_counter() - t0
     prob.cleanup()
-    stats = prob.model.mesh.imprint.remesh_stats
+    stats = (dict(hits=0, misses=0, seconds=0.0) if args.morph else prob.model.mesh.imprint.remesh_stats)
     n_local = prob.driver.iter_count
     stats_all = comm.gather((n_local, stats, wall), root=0) if comm is not None and nproc > 1 else [
         (n_local, stats, wall)]
@@ -240,17 +267,34 @@ def main(argv=None) -> int:
     n_ok = sum(c["success"] for c in cases)
     summary = {"generator": args.generator, "cases": n_cases, "succeeded": n_ok, "processes": nproc,
                "size": args.size, "ribs": args.ribs, "thickness": args.thickness,
-               "remesh_cache": not args.no_remesh_cache, "wall_seconds": round(wall, 2),
+               "remesh_cache": not args.no_remesh_cache, "morph": args.morph, "scale": args.scale,
+               "wall_seconds": round(wall, 2),
                "seconds_per_case": round(wall * nproc / max(n_cases, 1), 2),
                "per_process": [{"cases": n, "remesh_hits": s["hits"], "remesh_misses": s["misses"],
                                 "remesh_seconds": round(s["seconds"], 2), "wall_seconds": round(w, 2)}
                                for n, s, w in stats_all],
                "records": [str(f) for f in case_files(db)], "case_list": cases}
+    if args.morph:
+        ok = [c for c in cases if c["success"]]
+        share = [c["morph_seconds"][0] / c["ccx_seconds"][0] for c in ok]
+        summary["morph_summary"] = {
+            "remeshed": int(sum(c["remeshed"][0] for c in ok)),
+            "meshing_over_ccx_median": float(np.median(share)) if share else None,
+            "meshing_over_ccx_max": float(max(share)) if share else None,
+            "meshing_over_ccx_max_morphed": float(max((x for x, c in zip(share, ok) if not c["remeshed"][0]),
+                                                      default=float("nan")))}
     (out / "doe_summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     print(format_table(cases))
-    print(f"{n_ok}/{n_cases} cases succeeded on {nproc} process{'es' if nproc > 1 else ''} in {wall:.1f} s "
-          f"({summary['seconds_per_case']:.1f} s per case per process); remesh: "
-          + ", ".join(f"{s['hits']} cached / {s['misses']} run ({s['seconds']:.1f} s)" for _, s, _ in stats_all))
+    head = (f"{n_ok}/{n_cases} cases succeeded on {nproc} process{'es' if nproc > 1 else ''} in {wall:.1f} s "
+            f"({summary['seconds_per_case']:.1f} s per case per process); ")
+    if args.morph:
+        ms = summary["morph_summary"]
+        med, big = (100 * (ms[k] or 0.0) for k in ("meshing_over_ccx_median", "meshing_over_ccx_max"))
+        print(head + f"morph: {ms['remeshed']} case(s) meshed anew; meshing time / ccx time per case: median "
+              f"{med:.1f} %, largest {big:.1f} % (morphed cases: {100 * ms['meshing_over_ccx_max_morphed']:.1f} %)")
+    else:
+        print(head + "remesh: " + ", ".join(f"{s['hits']} cached / {s['misses']} run ({s['seconds']:.1f} s)"
+                                          for _, s, _ in stats_all))
     written = [out / "doe_summary.json"] + case_files(db)
     if not args.no_plot and n_ok:
         title = (f"{'Latin hypercube' if args.generator == 'lhs' else 'full factorial'} DOE, {n_cases} cases, "

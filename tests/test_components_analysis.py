@@ -73,6 +73,7 @@ def test_calculix_comp_on_pipeline_wing(wing, tmp_path):
     k = np.argmax(np.abs(r.displacement @ up))
     assert mesh.points[k, 1] > 0.9 * SPAN
     assert p.get_val("max_deflection")[0] == pytest.approx((r.displacement @ up)[k], rel=1e-12)
+    assert p.get_val("ccx_seconds")[0] == r.seconds > 0                  # the run's wall time, recorded
     # the tip deflection is the mean u.up of the tip rib (wing/rib_2 of 3 ribs) and its chains on the skin
     rib = mesh.component_names.index("wing/rib_2")
     f = mesh.faces[mesh.component == rib]

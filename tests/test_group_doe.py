@@ -7,7 +7,8 @@
   message, the others with finite mass/stress/deflection (mass = MassComp's), one remesh;
 * ``om.n2`` of the group writes its HTML;
 * (slow) ``run_scripts/doe_rib_sweep.py --cases 4`` serially and under ``mpirun -n 2 ...
-  --parallel`` record identical outputs (skipped only when mpirun, mpi4py or ccx is missing).
+  --parallel`` record identical outputs, with a new mesh per case and with ``--morph --scale 0.25``
+  (skipped only when mpirun, mpi4py or ccx is missing).
 """
 from __future__ import annotations
 
@@ -216,15 +217,23 @@ def test_doe_case_names_unique_across_ranks(tmp_path):
     assert names == {f"rank{i % 2}:DOEDriver_List|{i}": pytest.approx(0.1 * i) for i in range(5)}
 
 
+#: recorded wall times: they differ between runs
+TIMINGS = ("ccx_seconds", "morph_seconds")
+
+
 @pytest.mark.slow
 @needs_ccx
-def test_doe_serial_and_mpi_record_identical_outputs(tmp_path):
+@pytest.mark.parametrize("morph", [False, True], ids=["remesh", "morph"])
+def test_doe_serial_and_mpi_record_identical_outputs(tmp_path, morph):
+    """The script serially and on two processes records the same cases exactly (with --morph: every case a
+    morph of the same reference mesh, whichever process runs it, or a new mesh where the morph misses
+    its checks)."""
     mpi, why = _mpi_command()
     if mpi is None:
         pytest.skip(why)
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
            "OPENMDAO_WORKDIR": str(tmp_path)}
-    args = ["--cases", "4", "--no-plot"]
+    args = ["--cases", "4", "--no-plot"] + (["--morph", "--scale", "0.25"] if morph else [])
     serial = subprocess.run([sys.executable, str(DOE_SCRIPT), *args, "--out-dir", str(tmp_path / "serial")],
                             capture_output=True, text=True, env=env, timeout=900)
     assert serial.returncode == 0, serial.stderr[-3000:]
@@ -237,6 +246,14 @@ def test_doe_serial_and_mpi_record_identical_outputs(tmp_path):
     ser, par = (json.loads((tmp_path / d / "doe_summary.json").read_text()) for d in ("serial", "parallel"))
     assert (tmp_path / "parallel" / "doe_cases.sql_1").is_file()      # really two recording processes
     assert par["processes"] == 2 and len(par["records"]) == 2 and len(ser["records"]) == 1
-    a, b = ser["case_list"], par["case_list"]
+    a, b = ([{k: v for k, v in c.items() if k not in TIMINGS} for c in s["case_list"]] for s in (ser, par))
     assert len(a) == len(b) == 4 and all(c["success"] for c in a)
     assert a == b                                                       # identical recorded outputs, exactly
+    assert all(c["ccx_seconds"][0] > 0 for c in ser["case_list"])
+    if morph:
+        # a morphed case has the reference's elements; the summary counts the cases meshed anew
+        ref = run_pipeline(SURFACE, LAYOUT, SIZE, progress=False).mesh
+        morphed = [c for c in a if c["remeshed"] == [0.0]]
+        assert morphed and all(c["n_elements"] == [float(ref.n_faces)] for c in morphed)
+        assert ser["morph_summary"]["remeshed"] == len(a) - len(morphed)
+        assert all(c["morph_seconds"][0] > 0 for c in ser["case_list"])

@@ -143,6 +143,7 @@ def test_component_totals_and_partials(ref_inner):
     p = _problem(ref_inner)
     p.run_model()
     assert p["remeshed"][0] == 0
+    assert (p["n_nodes"][0], p["n_elements"][0]) == (ref_inner.n_points, ref_inner.mesh.n_faces)
     assert p["mass"][0] == pytest.approx(2700 * 0.002 * ref_inner.mesh.face_areas().sum(), rel=1e-12)
     tot = p.compute_totals(["mass"], ["wing:rib_eta", "wing:spar_chord"])
     h = 1e-6
@@ -211,6 +212,8 @@ def test_a_morph_that_misses_its_checks_is_a_new_mesh_or_a_failed_case(ref_inner
                         progress=False).mesh
     assert np.array_equal(new.points, want.points) and np.array_equal(new.faces, want.faces)
     assert len(p["x_struct0"]) == 3 * ref_inner.n_points
+    assert (p["n_nodes"][0], p["n_elements"][0]) == (want.n_points, want.n_faces) != (ref_inner.n_points,
+                                                                                       ref_inner.mesh.n_faces)
     q = _problem(ref_inner, min_scaled_jacobian=0.99, on_failure="error")
     q["wing:rib_eta"] = eta
     with pytest.raises(om.AnalysisError, match="misses its checks"):
@@ -325,3 +328,26 @@ def test_each_wing_of_a_two_wing_aircraft_follows_its_own_ribs(geometry_dir, man
                     assert dist.max() < 1e-9 * m.diagonal, name
                     checked += 1
             assert checked >= 20
+
+
+def test_a_node_on_a_sharp_trailing_edge_is_on_the_triangles_of_both_sides():
+    """The facing check: a skin node on the sharp trailing edge whose ray lands on the other side's triangle
+    (within rounding of the edge) lies on a triangle facing its own side too, and the morph passes; the same
+    node 1e-3 m off the edge is on no facing triangle."""
+    from shellmesh_mdao.morph import MEMBER_NODE, evaluate, on_facing_triangle
+    from shellmesh_mdao.morph.place import tri_frame
+
+    r = morph_reference(naca_wing(n_chord=24, n_span=16), naca_wing_layout(ribs=3), 0.25)
+    params = {"wing": (np.array([0.0, 0.46372033759818315, 1.0]), np.array([0.15084676374380224, 0.6404302573099999]))}
+    x, ch, _, _ = evaluate(r, params, None)
+    moved = np.flatnonzero(np.any(x != r.mesh.points, axis=1) & (r.kind != MEMBER_NODE))
+    ray = moved[~(r.feature[moved] | ch.closest[moved] | r.facing_away[moved])]
+    nt = tri_frame(r, ch.skin_tri[ray])[3]
+    away = ray[(nt * r.skin_normals[ray]).sum(1) <= 0]
+    assert len(away) >= 1
+    assert np.allclose(r.c[away], 1.0, atol=1e-9)                        # on the trailing edge
+    assert on_facing_triangle(r, away, ch.skin_tri[away], x[away], 1e-9 * r.mesh.diagonal).all()
+    off = x[away] - 1e-3 * r.skin_normals[away]                          # 1 mm off the edge
+    assert not on_facing_triangle(r, away, ch.skin_tri[away], off, 1e-9 * r.mesh.diagonal).any()
+    _, chk = morph(r, params)
+    assert chk.ok and chk.n_flipped == 0, chk.reason

@@ -47,7 +47,8 @@ class CalculixShellAnalysis(om.ExplicitComponent):
     stresses of each family, 0 for families without faces), both over the faces outside the
     band of width ``clamp_band`` at the clamp, ``tip_deflection`` (mean displacement along
     ``up`` of the ``tip_nodes``: by default the tip rib's nodes, else the tip section's) and
-    ``max_deflection`` (displacement along ``up`` of the node of largest ``|u.up|``). The last full result
+    ``max_deflection`` (displacement along ``up`` of the node of largest ``|u.up|``), ``ccx_seconds`` (wall
+    time of the ccx run that gave these outputs: a record for studies, no partials). The last full result
     (:class:`~shellmesh_mdao.analysis.ShellAnalysis`:
     displacement field, per-element von Mises stress, ...) of the latest ``compute`` is kept in
     ``self.last_result``. Results of the last few thickness vectors are cached, so a ``compute``
@@ -144,6 +145,7 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         self.add_output("ks_von_mises", val=np.zeros(n), shape=(n,), desc="KS von Mises stress per family")
         self.add_output("tip_deflection", val=0.0, desc="mean displacement along up of the tip nodes")
         self.add_output("max_deflection", val=0.0, desc="displacement along up of the node of largest |u.up|")
+        self.add_output("ccx_seconds", val=0.0, desc="wall time of the ccx run of these outputs (no partials)")
         nb = int(o["buckling"])
         if nb < 0:
             raise SolverError(f"{self.msginfo}: buckling must be the number of buckling factors wanted (0: none), "
@@ -214,6 +216,7 @@ class CalculixShellAnalysis(om.ExplicitComponent):
         outputs["ks_von_mises"] = r.ks_von_mises
         outputs["tip_deflection"] = r.tip_deflection
         outputs["max_deflection"] = r.max_deflection
+        outputs["ccx_seconds"] = r.seconds
         if self.options["buckling"]:
             outputs["buckling_factors"] = r.buckling_factors
             outputs["ks_buckling"] = r.ks_buckling

@@ -46,7 +46,8 @@ class MorphComp(om.ExplicitComponent):
     Inputs ``<wing>:rib_eta`` (K,) and ``<wing>:spar_chord`` (J,) of each wing (the reference
     layout's values as defaults). Outputs ``x_struct0`` (3 n,), ``remeshed`` (0 or 1),
     ``min_scaled_jacobian`` (of the mesh in ``shell_mesh``), ``morph_seconds`` (time of the morph and
-    its checks, or of the new mesh) and the discrete ``shell_mesh``. :attr:`last_check` the
+    its checks, or of the new mesh), ``n_nodes`` and ``n_elements`` (of ``shell_mesh``, as
+    ``ShellMeshGroup``'s) and the discrete ``shell_mesh``. :attr:`last_check` the
     :class:`~shellmesh_mdao.morph.MorphCheck` of the latest ``compute``.
     """
 
@@ -73,6 +74,9 @@ class MorphComp(om.ExplicitComponent):
         self.add_output("remeshed", val=0.0, desc="1 when the morph missed its checks and shell_mesh is a new mesh")
         self.add_output("min_scaled_jacobian", val=0.0, desc="lowest scaled Jacobian of shell_mesh")
         self.add_output("morph_seconds", val=0.0, desc="time of the morph and its checks (or of the new mesh)")
+        self.add_output("n_nodes", val=float(n), desc="nodes of shell_mesh (the reference's unless remeshed)")
+        self.add_output("n_elements", val=float(ref.mesh.n_faces),
+                        desc="elements of shell_mesh (the reference's unless remeshed)")
         self.add_discrete_output("shell_mesh", val=None, desc="the mesh to analyse (ShellMesh)")
         for name, _, _ in self._layout_vars:
             self.declare_partials("x_struct0", name)
@@ -114,6 +118,8 @@ class MorphComp(om.ExplicitComponent):
             outputs["remeshed"] = 1.0
             outputs["min_scaled_jacobian"] = float(res.report["guarantees"]["min_scaled_jacobian"])
         outputs["morph_seconds"] = time.perf_counter() - t0
+        outputs["n_nodes"] = mesh.n_points
+        outputs["n_elements"] = mesh.n_faces
         discrete_outputs["shell_mesh"] = mesh
 
     def compute_partials(self, inputs, partials, discrete_inputs=None):

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.locator import closest_point_on_triangles
 from ..errors import LayoutError, ShellMeshError
 from ..families import member_of, rib_name, spar_name
 from ..guarantees import PLANE_TOL, POOR_JACOBIAN, SURFACE_TOL
@@ -59,7 +60,8 @@ from .plan import CHORD_FADE, END_STILL, HEIGHT_FADE, WingFrame, chord_knots, do
     plan_coordinates, plan_point, rib_knots_and_planes, span_fade
 
 __all__ = ["MorphReference", "MorphCheck", "morph_reference", "morph", "morph_jacobian", "morph_check",
-           "morph_parameters", "CHORD_FADE", "HEIGHT_FADE", "END_STILL", "COMPLEX_STEP", "SIDE_STEP", "CREASE_ANGLE"]
+           "morph_parameters", "on_facing_triangle", "CHORD_FADE", "HEIGHT_FADE", "END_STILL", "COMPLEX_STEP",
+           "SIDE_STEP", "CREASE_ANGLE"]
 
 #: the complex step of :func:`morph_jacobian` (exact to rounding for any step this small)
 COMPLEX_STEP = 1e-30
@@ -472,6 +474,32 @@ def morph_jacobian(reference: MorphReference, params=None, wrt=None) -> dict:
     return out
 
 
+def on_facing_triangle(ref: MorphReference, rows, tri, x, tol: float) -> np.ndarray:
+    """(k,) bool: node ``rows[i]`` at ``x[i]`` lies within ``tol`` of an input triangle that faces its
+    reference side, among the triangles around the vertices of input triangle ``tri[i]`` (a node on a sharp
+    edge, such as a trailing edge, is on the triangles of both sides: the ray's pick of the other
+    side's is no fold)."""
+    rows = np.asarray(rows, np.int64)
+    if not len(rows):
+        return np.zeros(0, bool)
+    L = ref.locator
+    ptr, v2t = L.vertex_triangles()
+    verts = L.triangles[np.asarray(tri, np.int64)]
+    owner, cand = [], []
+    for j in range(3):
+        v = verts[:, j]
+        cnt = ptr[v + 1] - ptr[v]
+        owner.append(np.repeat(np.arange(len(rows)), cnt))
+        cand.append(v2t[np.repeat(ptr[v], cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))])
+    owner, cand = np.concatenate(owner), np.concatenate(cand)
+    a, b, c, nt = tri_frame(ref, cand)
+    facing = (nt * ref.skin_normals[rows[owner]]).sum(1) > 0
+    d = np.linalg.norm(closest_point_on_triangles(x[owner], a, b, c) - x[owner], axis=1)
+    ok = np.zeros(len(rows), bool)
+    np.logical_or.at(ok, owner, facing & (d <= tol))
+    return ok
+
+
 def morph_check(reference: MorphReference, x, ch=None, plane_points=None, plane_normals=None,
                 min_sj: float = POOR_JACOBIAN) -> MorphCheck:
     """The checks of a morphed mesh (coordinates ``x``): every element's scaled Jacobian above
@@ -489,7 +517,8 @@ def morph_check(reference: MorphReference, x, ch=None, plane_points=None, plane_
     if ch is not None and len(sk):
         ray = sk[~(ref.feature[sk] | ch.closest[sk] | ref.facing_away[sk])]
         _, _, _, nt = tri_frame(ref, np.maximum(ch.skin_tri[ray], 0))
-        flipped = int(((nt * ref.skin_normals[ray]).sum(1) <= 0).sum())
+        away = ray[(nt * ref.skin_normals[ray]).sum(1) <= 0]
+        flipped = int(len(away) - on_facing_triangle(ref, away, ch.skin_tri[away], x[away], PLANE_TOL * diag).sum())
     dplane = np.zeros(0)
     if plane_points is not None:
         mem = np.flatnonzero(moved & (ref.planes[:, 0] >= 0))
