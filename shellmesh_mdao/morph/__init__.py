@@ -518,7 +518,8 @@ def morph_check(reference: MorphReference, x, ch=None, plane_points=None, plane_
         ray = sk[~(ref.feature[sk] | ch.closest[sk] | ref.facing_away[sk])]
         _, _, _, nt = tri_frame(ref, np.maximum(ch.skin_tri[ray], 0))
         away = ray[(nt * ref.skin_normals[ray]).sum(1) <= 0]
-        flipped = int(len(away) - on_facing_triangle(ref, away, ch.skin_tri[away], x[away], PLANE_TOL * diag).sum())
+        flipped = int(len(away) - on_facing_triangle(ref, away, np.maximum(ch.skin_tri[away], 0), x[away],
+                                                        PLANE_TOL * diag).sum())
     dplane = np.zeros(0)
     if plane_points is not None:
         mem = np.flatnonzero(moved & (ref.planes[:, 0] >= 0))
