@@ -97,15 +97,14 @@ def main(argv=None) -> int:
             p[name] = v
             t = time.perf_counter()
             p.run_model()
+            area = family_areas_at(ref.mesh, p["x_struct0"])[0]
             rows.append({"d": float(d), "mass": float(p["mass.mass"][0]),
                          "tip_deflection": float(p["fea.tip_deflection"][0]),
                          "ks_top": float(p["fea.ks_von_mises"][top]), "max_von_mises": float(p["fea.max_von_mises"][0]),
                          "remeshed": int(p["remeshed"][0]), "morph_seconds": float(p["morph_seconds"][0]),
                          "case_seconds": time.perf_counter() - t,
                          "min_scaled_jacobian": float(p["min_scaled_jacobian"][0]),
-                         **{f"area_{k}": float(area[kinds == k].sum())
-                            for area in [family_areas_at(ref.mesh, p["x_struct0"])[0]]
-                            for k in ("skins", "spars", "ribs")}})
+                         **{f"area_{k}": float(area[kinds == k].sum()) for k in ("skins", "spars", "ribs")}})
             print(f"{label} {d:+.4f}: mass {rows[-1]['mass']:.4f} kg, tip {1e3 * rows[-1]['tip_deflection']:.3f} mm, "
                   f"KS {1e-6 * rows[-1]['ks_top']:.2f} MPa, morph {rows[-1]['morph_seconds']:.3f} s, "
                   f"case {rows[-1]['case_seconds']:.1f} s, remeshed {rows[-1]['remeshed']}", flush=True)

@@ -144,6 +144,16 @@ class SurfaceLocator:
             self._v2t = (ptr, (order // 3).astype(np.int64))
         return self._v2t
 
+    def triangle_neighbourhoods(self, tri):
+        """The triangles around the three vertices of each triangle ``tri[i]`` (repeats kept):
+        ``(owner, candidates)``, flat, row by row and vertex by vertex (``owner`` the row ``i``)."""
+        ptr, v2t = self.vertex_triangles()
+        corners = self.triangles[np.asarray(tri, np.int64)].reshape(-1)          # (3 k,)
+        cnt = ptr[corners + 1] - ptr[corners]
+        owner = np.repeat(np.arange(len(corners)) // 3, cnt)
+        offs = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        return owner, v2t[np.repeat(ptr[corners], cnt) + offs]
+
     # ------------------------------------------------------------------ queries
     def closest(self, q, hint=None):
         """Exact closest point on the triangle set for each query point. ``hint`` (k,) optional:
@@ -215,16 +225,7 @@ class SurfaceLocator:
         pts = np.empty_like(o)
         bad = np.flatnonzero(~ok | near)
         if len(bad):
-            ptr, v2t = self.vertex_triangles()
-            corners = T[prim[bad]]                                   # (b, 3)
-            cnt = ptr[corners + 1] - ptr[corners]                    # (b, 3)
-            tot = cnt.sum(1)
-            ray_of = np.repeat(np.arange(len(bad)), tot)
-            flat_c = corners.reshape(-1)
-            flat_n = cnt.reshape(-1)
-            starts = np.repeat(ptr[flat_c], flat_n)
-            offs = np.arange(flat_n.sum()) - np.repeat(np.cumsum(flat_n) - flat_n, flat_n)
-            cand = v2t[starts + offs]
+            ray_of, cand = self.triangle_neighbourhoods(prim[bad])
             rb = bad[ray_of]
             t2, u2, v2, det2 = ray_triangle_intersect(o[rb], d[rb], L[T[cand, 0]], L[T[cand, 1]], L[T[cand, 2]])
             ok2 = (det2 != 0) & (u2 >= -tol) & (v2 >= -tol) & (u2 + v2 <= 1 + tol) & (t2 > 0) & np.isfinite(t2)

@@ -98,7 +98,6 @@ class MorphReference:
     member_wing: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     surface: ShellMesh | None = None
     options: object = None
-    rings: tuple = ()
     creases: object = None
     crease_seg: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     crease_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -280,8 +279,7 @@ def build_reference(mesh: ShellMesh, lay: Layout, size: float, locator) -> Morph
                          kind=kind, planes=planes, r=r, c=c, weight_r=wr, weight_c=wc, tau=tau, mid=mid,
                          skin_normals=nrm, feature=feature, offset=np.zeros((n, 3)), creases=creases,
                          crease_seg=crease_seg, crease_s=crease_s, facing_away=np.zeros(n, bool),
-                         member_names=[s.name for s in specs], member_wing=member_wing,
-                         rings=locator.vertex_triangles())
+                         member_names=[s.name for s in specs], member_wing=member_wing)
     # offsets of the skin nodes from the surface where the morph's rule places them
     rows = np.flatnonzero((wing_of >= 0) & (kind != MEMBER_NODE))
     if len(rows):
@@ -482,16 +480,7 @@ def on_facing_triangle(ref: MorphReference, rows, tri, x, tol: float) -> np.ndar
     rows = np.asarray(rows, np.int64)
     if not len(rows):
         return np.zeros(0, bool)
-    L = ref.locator
-    ptr, v2t = L.vertex_triangles()
-    verts = L.triangles[np.asarray(tri, np.int64)]
-    owner, cand = [], []
-    for j in range(3):
-        v = verts[:, j]
-        cnt = ptr[v + 1] - ptr[v]
-        owner.append(np.repeat(np.arange(len(rows)), cnt))
-        cand.append(v2t[np.repeat(ptr[v], cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))])
-    owner, cand = np.concatenate(owner), np.concatenate(cand)
+    owner, cand = ref.locator.triangle_neighbourhoods(tri)
     a, b, c, nt = tri_frame(ref, cand)
     facing = (nt * ref.skin_normals[rows[owner]]).sum(1) > 0
     d = np.linalg.norm(closest_point_on_triangles(x[owner], a, b, c) - x[owner], axis=1)

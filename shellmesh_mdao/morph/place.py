@@ -211,14 +211,8 @@ def refine_hits(ref, o, d, tri):
     rows = np.flatnonzero(tri >= 0)
     if not len(rows):
         return out
-    ptr, ring = ref.rings
     L = ref.locator
-    verts = L.triangles[tri[rows]]                             # (k, 3)
-    start = ptr[verts].reshape(-1)
-    cnt = (ptr[verts + 1] - ptr[verts]).reshape(-1)
-    owner = np.repeat(np.repeat(np.arange(len(rows)), 3), cnt)
-    pos = np.repeat(start - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(cnt.sum())
-    cand = ring[pos]
+    owner, cand = L.triangle_neighbourhoods(tri[rows])
     T = L.triangles[cand]
     P = L.points
     t, u, v, det = ray_triangle_intersect(o[rows][owner], d[rows][owner], P[T[:, 0]], P[T[:, 1]], P[T[:, 2]])
