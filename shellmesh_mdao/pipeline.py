@@ -204,12 +204,13 @@ def stage_project(state: PipelineState) -> PipelineState:
     the local element size between members closer than ``size``
     (:func:`~shellmesh_mdao.project.close_member_field`; the report's ``size_field``)."""
     from .imprint import chain_specs
-    from .project import check_member_heights, close_member_field, project_layout
+    from .project import check_member_heights, close_member_field, project_layout, thin_member_field
 
     _need(state, "project")
     projected = project_layout(state.locator, state.layout)
     check_member_heights(state.locator, state.layout, state.size)
-    field = close_member_field(state.locator, state.layout, state.size)
+    field = close_member_field(state.locator, state.layout, state.size).union(
+        thin_member_field(state.locator, state.layout, state.size))
     st = state.but(projected=projected, specs=chain_specs(state.layout, projected), size_field=field,
                    stage="project")
     st.report["size_field"] = field.summary(state.size)

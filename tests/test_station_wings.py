@@ -212,8 +212,11 @@ def test_edge_webs_go_where_the_wing_is_tall_enough():
     place (the rear web at 0.76 of the chord) is less than 0.3 element sizes tall at the tip, so
     the rear web moves towards the spar to where it is tall enough (the web's place is the
     tool's choice, not the user's); at a size where no place between the edge and the spar is
-    tall enough, the error says the wing is too thin for a box at that size and gives a size
-    that does."""
+    0.3 sizes tall, the webs go where they are tallest (the mesh refines around them: see
+    test_project's thin-member tests); on a NACA 0001 tail, where no place is even 0.3 of the
+    finest local size (0.1 element sizes) tall, the error says the wing is too thin for a box at
+    that size and gives a size that does."""
+    from shellmesh_mdao.layout import MIN_LOCAL_SIZE
     from shellmesh_mdao.layout.wingbox import MIN_WEB_HEIGHT, WEB_GAP
 
     tail = naca_wing(span=2.0, root_chord=1.0, tip_chord=0.6, sweep_deg=30.0, naca="0006")
@@ -225,15 +228,18 @@ def test_edge_webs_go_where_the_wing_is_tall_enough():
     assert 0.35 < webs["w/te_web"][1] < 0.7 and webs["w/le_web"][1] < 0.35     # each on its side of the spar
     assert (webs["w/te_web"][1] - 0.35) * 0.6 >= WEB_GAP * 0.1 - 1e-9          # apart from the spar
     assert any("edge webs" in n and "'w/te_web' at 0.5" in n for n in lay.station_wings[0].notes)
+    webs = _web_heights(resolve(tail, d, size=0.2), "w", 0.2)                  # thin: refined, not refused
+    assert all(MIN_WEB_HEIGHT * MIN_LOCAL_SIZE <= h < MIN_WEB_HEIGHT for h, _ in webs.values()), webs
+    thinner = naca_wing(span=2.0, root_chord=1.0, tip_chord=0.6, sweep_deg=30.0, naca="0001")
     with pytest.raises(LayoutError, match=r"wing 'w': with fewer than two spars and a sharp trailing edge the ribs "
                                           r"end on edge webs, but between its leading edge and its spar at 0\.35 of "
-                                          r"the chord the wing is nowhere at least 0\.3 element sizes .* too thin to "
-                                          r"carry a box at element size 0\.2; use an element size of at most") as e:
-        resolve(tail, d, size=0.2)
+                                          r"the chord the wing is nowhere at least 0\.03 element sizes .* too thin to "
+                                          r"carry a box at element size 0\.25; use an element size of at most") as e:
+        resolve(thinner, d, size=0.25)
     fit = float(str(e.value).split("of at most ")[1].split(",")[0])
-    assert 0.05 < fit < 0.2
-    lay = resolve(tail, d, size=fit)                                            # the size given does
-    assert all(h >= MIN_WEB_HEIGHT for h, _ in _web_heights(lay, "w", fit).values())
+    assert 0.05 < fit < 0.25
+    lay = resolve(thinner, d, size=fit)                                         # the size given does
+    assert all(h >= MIN_WEB_HEIGHT * MIN_LOCAL_SIZE for h, _ in _web_heights(lay, "w", fit).values())
 
 
 def test_crank_kinks_the_spars(wing):
@@ -313,8 +319,12 @@ def test_blunt_trailing_edge_below_the_element_size_is_sharp():
 
 
 def test_checks_before_meshing(wing):
-    with pytest.raises(LayoutError, match=r"spar 'w/spar_1' .* tall .* move the spar away from the trailing edge"):
-        resolve(wing, layout(spars={"chord_fractions": [0.15, 0.97]}))
+    # a spar 0.015 element sizes tall would need elements of 0.05 sizes: below the finest local size (0.1)
+    with pytest.raises(LayoutError, match=r"spar 'w/spar_1' .* is only 0.0015\d+ tall .*0.015 element sizes: a web of "
+                                          r"quads needs elements of at most 0.0051\d+ there .*below the smallest local "
+                                          r"size the mesh refines to \(0.1 element sizes, 0.01\); move the spar away "
+                                          r"from the trailing edge.* or use an element size below 0.0510"):
+        resolve(wing, layout(spars={"chord_fractions": [0.15, 0.995]}))
     # 60 ribs 0.095 apart at size 0.1 are laid out (and meshed with smaller elements between them);
     # 400 coincide at that size: every pair is named
     assert not resolve(wing, layout(ribs={"count": 60})).station_wings[0].close_pairs

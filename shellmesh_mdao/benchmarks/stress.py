@@ -71,8 +71,10 @@ SIZE_FACTORS = (0.7, 2.8)
 #: a later-stage refusal is "genuine" only when members come closer than this many element sizes
 TIGHT = 2.0
 #: ... or when a spar web is less than this many element sizes tall somewhere (the package
-#: refuses below 0.3, :data:`shellmesh_mdao.project.MIN_MEMBER_HEIGHT`)
-HEIGHT_TIGHT = 0.4
+#: refuses below 0.03: :data:`shellmesh_mdao.project.MIN_MEMBER_HEIGHT` local sizes of the finest,
+#: :data:`shellmesh_mdao.layout.MIN_LOCAL_SIZE` element sizes; a web lower than 0.3 sizes is meshed
+#: with smaller elements)
+HEIGHT_TIGHT = 0.04
 #: ... or when a full-chord rib's section (the input skin cut by its plane) has a corner sharper
 #: than asin(0.2) degrees (a quad in it cannot have a scaled Jacobian above 0.2)
 WEDGE_TIGHT = math.degrees(math.asin(0.2))

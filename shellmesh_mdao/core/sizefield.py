@@ -62,6 +62,18 @@ class SizeField:
     def empty(self) -> bool:
         return len(self.sizes) == 0
 
+    def union(self, other: "SizeField") -> "SizeField":
+        """The field asking for the smaller of the two fields' sizes everywhere (their points,
+        sizes and reasons together; the same grading)."""
+        if other.empty:
+            return self
+        if self.empty:
+            return other
+        if self.grading != other.grading:
+            raise ValueError(f"SizeField.union needs one grading, got {self.grading!r} and {other.grading!r}")
+        return SizeField(np.vstack([self.points, other.points]), np.concatenate([self.sizes, other.sizes]),
+                         self.grading, self.reasons + other.reasons)
+
     def scaled(self, factor: float) -> "SizeField":
         """The same field in units ``factor`` times larger (sizes and grading both scaled: the
         remesh works at twice the quad size)."""

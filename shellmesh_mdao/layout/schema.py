@@ -44,7 +44,7 @@ from .stations import END_RIBS, RIB_ORIENTATIONS, StationWing, parse_station_win
 
 __all__ = ["Layout", "WingLayout", "StationWing", "ExplicitMember", "MemberSpec", "load_layout",
            "layout_from_manifest", "explicit_plane", "resample_polyline", "MIN_UP_SPAN_ANGLE_DEG", "RIB_ORIENTATIONS",
-           "END_RIBS", "MIN_MEMBER_GAP", "coincident_parts"]
+           "END_RIBS", "MIN_MEMBER_GAP", "MIN_LOCAL_SIZE", "coincident_parts"]
 
 #: ``up`` must make at least this angle with the span line (else the rib normal is undefined).
 MIN_UP_SPAN_ANGLE_DEG = 10.0
@@ -55,6 +55,11 @@ MIN_UP_SPAN_ANGLE_DEG = 10.0
 #: smallest edge (``remesh.DEFAULT_MIN_EDGE_FRACTION`` of its edge length, twice the element size)
 #: is 0.2 element sizes.
 MIN_MEMBER_GAP = 0.2
+
+#: where a spar or web is too thin for a web of quads of the element size, the mesh refines around
+#: it (the project stage's :func:`~shellmesh_mdao.project.thin_member_field`), down to this fraction
+#: of the element size; a member that would need smaller elements still is refused
+MIN_LOCAL_SIZE = 0.1
 
 
 def coincident_parts(pairs) -> tuple:

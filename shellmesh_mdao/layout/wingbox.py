@@ -51,15 +51,19 @@ the report say so. The webs' place is the tool's choice, so it is one where a we
 :data:`EDGE_WEB_HEIGHT` element sizes tall from the root to the tip station (where the remesh keeps
 the upper and lower skin apart): where that one is lower, the web moves to the nearest chord
 fraction of its side of the box that is tall enough, else to the nearest at least
-:data:`MIN_WEB_HEIGHT` sizes tall (:func:`_web_fractions`); where none is, the wing is too thin to
-carry a box at that size and the error says so (its largest thickness there and the element size
-that would do).
+:data:`MIN_WEB_HEIGHT` sizes tall, else to the nearest at least :data:`MIN_WEB_HEIGHT` of the finest
+local size (:data:`MIN_LOCAL_SIZE` element sizes) tall (:func:`_web_fractions`; a web lower than
+:data:`MIN_WEB_HEIGHT` element sizes is meshed with smaller elements, as any spar: the project stage's
+:func:`~shellmesh_mdao.project.thin_member_field`); where none is, the wing is too thin to carry a box
+at that size and the error says so (its largest thickness there and the element size that would do).
 
 **Checks before meshing** (:class:`~shellmesh_mdao.errors.LayoutError` naming the member and
 the fix): a wing with members whose root and tip stations are closer than
 :data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` element sizes (too short for a box at that
-size: its root and tip ribs would coincide), a spar or web less than :data:`MIN_WEB_HEIGHT`
-element sizes tall somewhere (a web of quads that thin cannot be meshed), neighbouring ribs (spars) that cross or coincide (closer than
+size: its root and tip ribs would coincide), a spar or web less than :data:`MIN_WEB_HEIGHT` times
+:data:`MIN_LOCAL_SIZE` element sizes tall somewhere (a web is meshed with elements at most
+:data:`MIN_WEB_HEIGHT` of its height, and the mesh refines no further than :data:`MIN_LOCAL_SIZE`
+element sizes), neighbouring ribs (spars) that cross or coincide (closer than
 :data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` element sizes; one error names every such
 pair of every wing; closer than an element size but no closer than that, they are meshed with
 smaller elements between them), a member of one wing inside another wing's box (two halves whose
@@ -75,14 +79,15 @@ from scipy.ndimage import minimum_filter1d
 from ..errors import LayoutError
 from ..families import part_name, rib_name, spar_name, web_name
 from .planform import Planform, measure_planform
-from .schema import MIN_MEMBER_GAP, Layout, MemberSpec, coincident_parts
+from .schema import MIN_LOCAL_SIZE, MIN_MEMBER_GAP, Layout, MemberSpec, coincident_parts
 from .stations import StationWing
 
 __all__ = ["resolve_layout", "resolve_station_wing", "PlanformLine", "MIN_WEB_HEIGHT", "EDGE_WEB_HEIGHT", "MIN_EDGE_ANGLE",
            "MIN_BASE", "SPAR_TOL", "PLANFORM_TOL", "TURN_NOTE", "WEB_GAP"]
 
-#: a spar or web must be at least this many element sizes tall (the project stage's rule for
-#: corner-given spars, ``project.MIN_MEMBER_HEIGHT``; the layout stage cannot import it)
+#: a spar or web must be at least this many local element sizes tall (the project stage's rule,
+#: ``project.MIN_MEMBER_HEIGHT``; the layout stage cannot import it); lower than that at the element
+#: size, the mesh refines around it, down to :data:`MIN_LOCAL_SIZE` element sizes
 MIN_WEB_HEIGHT = 0.3
 #: an edge web stands where the wing is at least this many element sizes tall wherever the wing has
 #: room for that: the remesh cuts across a skin thinner than twice its chordal deviation (0.4 sizes
@@ -422,7 +427,10 @@ def _web_fractions(pf: Planform, spars, size: float, name: str, edge: str) -> tu
     :data:`SPAR_TOL` sizes to spare for its straightening: where the preferred fraction is lower
     than that, the web moves to the nearest fraction of its side of the box that is tall enough
     (an element size from the spar and the edges, else :data:`WEB_GAP` sizes), else to the
-    nearest at least :data:`MIN_WEB_HEIGHT` sizes tall (the same way). Where none is,
+    nearest at least :data:`MIN_WEB_HEIGHT` sizes tall (the same way), else to the nearest at
+    least :data:`MIN_WEB_HEIGHT` times :data:`MIN_LOCAL_SIZE` sizes tall (a web lower than
+    :data:`MIN_WEB_HEIGHT` sizes is meshed with smaller elements:
+    :func:`~shellmesh_mdao.project.thin_member_field`). Where none is,
     the wing cannot carry a box at this size: a LayoutError names the wing, its thickness and the
     element size that would do."""
     c = np.linspace(0.0, 1.0, 401)
@@ -451,9 +459,10 @@ def _web_fractions(pf: Planform, spars, size: float, name: str, edge: str) -> tu
     def room(a, b, hh, pref):
         """The fraction nearest ``pref`` between ``a`` and ``b`` (0 the leading edge, 1 the
         trailing edge, else a spar or web) where a web is tall enough at element size ``hh``
-        (:data:`EDGE_WEB_HEIGHT` sizes, else :data:`MIN_WEB_HEIGHT`): an element size from both
+        (:data:`EDGE_WEB_HEIGHT` sizes, else :data:`MIN_WEB_HEIGHT`, else :data:`MIN_WEB_HEIGHT`
+        local sizes of the finest the mesh refines to, :data:`MIN_LOCAL_SIZE`): an element size from both
         ends, else :data:`WEB_GAP` sizes from a member; None."""
-        for need in (EDGE_WEB_HEIGHT, MIN_WEB_HEIGHT):
+        for need in (EDGE_WEB_HEIGHT, MIN_WEB_HEIGHT, MIN_WEB_HEIGHT * MIN_LOCAL_SIZE):
             got = room_of(a, b, hh, pref, need)
             if got is not None:
                 return got
@@ -496,13 +505,14 @@ def _web_fractions(pf: Planform, spars, size: float, name: str, edge: str) -> tu
                                                    "its trailing edge")
     else:
         where = f"between its {'spar' if spars else 'leading-edge web'} at {a:.3g} of the chord and its trailing edge"
-    need = MIN_WEB_HEIGHT * size
+    lowest = MIN_WEB_HEIGHT * MIN_LOCAL_SIZE              # in element sizes: a web of the finest local size
+    need = lowest * size
     if H[k] < need:
-        thick = (f"nowhere at least {MIN_WEB_HEIGHT:g} element sizes ({need:.4g}) thick from its root to its tip "
+        thick = (f"nowhere at least {lowest:g} element sizes ({need:.4g}) thick from its root to its tip "
                  f"station: at most {H[k]:.4g} ({H[k] / size:.3f} element sizes, at {c[k]:.3g} of the chord, near "
                  f"station {abs(tmin[k]):.6g})")
     else:
-        thick = (f"at least {MIN_WEB_HEIGHT:g} element sizes ({need:.4g}) thick from its root to its tip station "
+        thick = (f"at least {lowest:g} element sizes ({need:.4g}) thick from its root to its tip station "
                  f"only closer than {WEB_GAP:g} element sizes to its {'spar' if spars else 'leading-edge web'}")
     fix = f"use an element size of at most {fit:.4g}, " if fit is not None else ""
     raise LayoutError(
@@ -590,17 +600,18 @@ def resolve_station_wing(w: StationWing, points, tris, size: float | None, up=No
     close = _close_pairs(w, box, bounds, lines, tk, xk, T, h)
     for nm, j, xs, ln in lines:
         th, tmin, cmin = _spar_height(box, ln, box.t0, box.t1)
-        if th < MIN_WEB_HEIGHT * h:
+        if th < MIN_WEB_HEIGHT * MIN_LOCAL_SIZE * h:
             p = box.point(tmin, float(ln(tmin)))
             edge = "trailing" if cmin > 0.5 else "leading"
             webs = (web_name(w.name, "le"), web_name(w.name, "te"))       # the webs' place is the tool's
             what = "" if nm in webs else "the spar away from the {edge} edge, "
             raise LayoutError(
                 f"spar '{nm}' (chord fraction {cmin:.3g} at station {abs(tmin):.6g}) is only {th:.4g} tall near "
-                f"[{', '.join(f'{v:.6g}' for v in p)}], {th / h:.3f} element sizes (at least {MIN_WEB_HEIGHT:g} "
-                f"needed): the wing is too thin there for a web of quads of size {h:g}; move {what.format(edge=edge)}"
-                f"the tip (or root) station to where the wing is thicker, or use an element size below "
-                f"{th / MIN_WEB_HEIGHT:.4g}")
+                f"[{', '.join(f'{v:.6g}' for v in p)}], {th / h:.3f} element sizes: a web of quads needs "
+                f"elements of at most {th / MIN_WEB_HEIGHT:.4g} there (its height at least {MIN_WEB_HEIGHT:g} of them), "
+                f"below the smallest local size the mesh refines to ({MIN_LOCAL_SIZE:g} element sizes, "
+                f"{MIN_LOCAL_SIZE * h:.4g}); move {what.format(edge=edge)}the tip (or root) station to where the wing "
+                f"is thicker, or use an element size below {th / MIN_WEB_HEIGHT / MIN_LOCAL_SIZE:.4g}")
     # ---------------------------------------------------------------- members
     specs = _members(w, box, lines, loop_ribs, bounds, tk, xk, T)
     return replace(w, planform=pf, specs=tuple(specs), notes=tuple(notes), close_pairs=tuple(close))

@@ -24,15 +24,17 @@ The pipeline functions on top (:func:`project_wing_stations`, :func:`project_pol
 seed points on the skin.
 
 Modules: ``seeds`` (the projection of the layout's members and the spar-height check), ``close``
-(:func:`close_member_field`: the local element size between members closer than the element size). The
+(:func:`close_member_field`: the local element size between members closer than the element size), ``thin``
+(:func:`thin_member_field`: the local element size along spars too thin for a web of quads of the element size). The
 locator and its compiled kernels are shared helpers: :mod:`shellmesh_mdao.core.locator`,
 :mod:`shellmesh_mdao.core.bvh`.
 """
 from __future__ import annotations
 
 from .close import CLOSE_SIZE, close_member_field
+from .thin import THIN_HEIGHT, THIN_STEP, thin_member_field
 from .seeds import (MIN_MEMBER_HEIGHT, ProjectedMember, check_member_heights, project_layout, project_polyline,
                     project_wing_stations)
 
 __all__ = ["project_wing_stations", "project_polyline", "project_layout", "ProjectedMember", "MIN_MEMBER_HEIGHT",
-           "check_member_heights", "close_member_field", "CLOSE_SIZE"]
+           "check_member_heights", "close_member_field", "CLOSE_SIZE", "thin_member_field", "THIN_STEP", "THIN_HEIGHT"]

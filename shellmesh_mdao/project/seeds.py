@@ -187,7 +187,8 @@ def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
     return {m.name: out[m.name] for m in specs}
 
 
-#: a spar web must be at least this many element sizes tall everywhere along it
+#: a spar web must be at least this many local element sizes tall everywhere along it (where it is
+#: lower than that at the element size, the mesh refines around it: ``thin_member_field``)
 MIN_MEMBER_HEIGHT = 0.3
 
 
@@ -196,9 +197,11 @@ def check_member_heights(locator: SurfaceLocator, layout, size: float, n: int = 
     ``+-up``, at ``n`` points strictly between the first and the last rib plane: at its ends
     a spar meets the outermost ribs, which may cut a rounded tip cap) against the element
     ``size``. Returns ``{spar name: (min height, point of the min)}``; raises
-    :class:`LayoutError` when a spar is less than :data:`MIN_MEMBER_HEIGHT` element sizes tall
-    somewhere (a spar close to the trailing or leading edge of a thin wing): a web thinner
-    than that cannot be meshed with quads of that size without slivers. Bounded ribs end on
+    :class:`LayoutError` when a spar is less than :data:`MIN_MEMBER_HEIGHT` times
+    :data:`~shellmesh_mdao.layout.MIN_LOCAL_SIZE` element sizes tall somewhere (a spar at the
+    very edge of a thin wing): a web is meshed with elements at most :data:`MIN_MEMBER_HEIGHT` of
+    its height (:func:`~shellmesh_mdao.project.thin_member_field`), and the mesh refines no further
+    than that local size. Bounded ribs end on
     the spars, so their smallest heights are the spars'; full-chord ribs close at the edges
     by design and are not checked."""
     from ..errors import LayoutError
@@ -218,16 +221,19 @@ def check_member_heights(locator: SurfaceLocator, layout, size: float, n: int = 
     for i, m in enumerate(spars):
         j = int(np.argmin(height[i]))
         out[m.name] = (float(height[i, j]), o[i * n + j].copy())
+    from ..layout import MIN_LOCAL_SIZE
     for m in spars:
         h, p = out[m.name]
-        if h < MIN_MEMBER_HEIGHT * size:
+        if h < MIN_MEMBER_HEIGHT * MIN_LOCAL_SIZE * size:
             edge = "trailing" if m.parameter > 0.5 else "leading"
-            ratio = np.floor(h / size * 1000.0) / 1000.0                # rounded down: never shows 0.3
-            e = np.floor(np.log10(h / MIN_MEMBER_HEIGHT)) - 3            # 4 significant digits, rounded down
-            limit = np.floor(h / MIN_MEMBER_HEIGHT / 10.0 ** e) * 10.0 ** e
+            ratio = np.floor(h / size * 1000.0) / 1000.0                # rounded down
+            e = np.floor(np.log10(h / MIN_MEMBER_HEIGHT / MIN_LOCAL_SIZE)) - 3   # 4 significant digits, rounded down
+            limit = np.floor(h / MIN_MEMBER_HEIGHT / MIN_LOCAL_SIZE / 10.0 ** e) * 10.0 ** e
             raise LayoutError(
                 f"spar '{m.name}' (c={m.parameter:g}) is only {h:.4g} tall near {_fmt_points(p[None], [0])}, "
-                f"{ratio:g} element sizes (at least {MIN_MEMBER_HEIGHT:g} needed): the wing is too thin "
-                f"there for a web of quads of size {size:g}; move the spar away from the {edge} edge (or the "
-                f"outermost rib inboard, if the point is at a thin tip) or use an element size below {limit:.4g}")
+                f"{ratio:g} element sizes: a web of quads needs elements of at most {h / MIN_MEMBER_HEIGHT:.4g} there "
+                f"(its height at least {MIN_MEMBER_HEIGHT:g} of them), below the smallest local size the mesh "
+                f"refines to ({MIN_LOCAL_SIZE:g} element sizes, {MIN_LOCAL_SIZE * size:.4g}); move the spar away "
+                f"from the {edge} edge (or the outermost rib inboard, if the point is at a thin tip) or use an "
+                f"element size below {limit:.4g}")
     return out
