@@ -200,9 +200,10 @@ def stage_layout(state: PipelineState, layout) -> PipelineState:
 
 def stage_project(state: PipelineState) -> PipelineState:
     """Cast every member's seed points onto the input skin and derive the curves to imprint;
-    refuse spars too thin for the element size (:func:`~shellmesh_mdao.project.check_member_heights`);
+    refuse spars too thin even for the finest local size (:func:`~shellmesh_mdao.project.check_member_heights`);
     the local element size between members closer than ``size``
-    (:func:`~shellmesh_mdao.project.close_member_field`; the report's ``size_field``)."""
+    (:func:`~shellmesh_mdao.project.close_member_field`) and along spars too thin for it
+    (:func:`~shellmesh_mdao.project.thin_member_field`), the report's ``size_field``."""
     from .imprint import chain_specs
     from .project import check_member_heights, close_member_field, project_layout, thin_member_field
 

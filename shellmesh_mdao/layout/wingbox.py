@@ -61,9 +61,9 @@ at that size and the error says so (its largest thickness there and the element 
 the fix): a wing with members whose root and tip stations are closer than
 :data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` element sizes (too short for a box at that
 size: its root and tip ribs would coincide), a spar or web less than :data:`MIN_WEB_HEIGHT` times
-:data:`MIN_LOCAL_SIZE` element sizes tall somewhere (a web is meshed with elements at most
-:data:`MIN_WEB_HEIGHT` of its height, and the mesh refines no further than :data:`MIN_LOCAL_SIZE`
-element sizes), neighbouring ribs (spars) that cross or coincide (closer than
+:data:`MIN_LOCAL_SIZE` element sizes tall somewhere (a web lower than :data:`MIN_WEB_HEIGHT` element
+sizes is meshed with elements of twice its height, and the mesh refines no further than
+:data:`MIN_LOCAL_SIZE` element sizes), neighbouring ribs (spars) that cross or coincide (closer than
 :data:`~shellmesh_mdao.layout.schema.MIN_MEMBER_GAP` element sizes; one error names every such
 pair of every wing; closer than an element size but no closer than that, they are meshed with
 smaller elements between them), a member of one wing inside another wing's box (two halves whose

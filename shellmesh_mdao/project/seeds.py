@@ -199,9 +199,9 @@ def check_member_heights(locator: SurfaceLocator, layout, size: float, n: int = 
     ``size``. Returns ``{spar name: (min height, point of the min)}``; raises
     :class:`LayoutError` when a spar is less than :data:`MIN_MEMBER_HEIGHT` times
     :data:`~shellmesh_mdao.layout.MIN_LOCAL_SIZE` element sizes tall somewhere (a spar at the
-    very edge of a thin wing): a web is meshed with elements at most :data:`MIN_MEMBER_HEIGHT` of
-    its height (:func:`~shellmesh_mdao.project.thin_member_field`), and the mesh refines no further
-    than that local size. Bounded ribs end on
+    very edge of a thin wing): a web lower than :data:`MIN_MEMBER_HEIGHT` element sizes is meshed
+    with elements of twice its height (:func:`~shellmesh_mdao.project.thin_member_field`), and the
+    mesh refines no further than :data:`~shellmesh_mdao.layout.MIN_LOCAL_SIZE` element sizes. Bounded ribs end on
     the spars, so their smallest heights are the spars'; full-chord ribs close at the edges
     by design and are not checked."""
     from ..errors import LayoutError
