@@ -34,7 +34,9 @@ from __future__ import annotations
 from .close import CLOSE_SIZE, close_member_field
 from .thin import THIN_HEIGHT, THIN_STEP, thin_member_field
 from .seeds import (MIN_MEMBER_HEIGHT, ProjectedMember, check_member_heights, project_layout, project_polyline,
+                    seed_curve_length, spar_heights,
                     project_wing_stations)
 
 __all__ = ["project_wing_stations", "project_polyline", "project_layout", "ProjectedMember", "MIN_MEMBER_HEIGHT",
-           "check_member_heights", "close_member_field", "CLOSE_SIZE", "thin_member_field", "THIN_STEP", "THIN_HEIGHT"]
+           "check_member_heights", "close_member_field", "CLOSE_SIZE", "thin_member_field", "THIN_STEP", "THIN_HEIGHT",
+           "spar_heights", "seed_curve_length"]

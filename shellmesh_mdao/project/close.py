@@ -17,6 +17,7 @@ from scipy.spatial import cKDTree
 from ..core.locator import SurfaceLocator
 from ..core.sizefield import SizeField
 from ..mesh import norm_rows
+from .seeds import seed_curve_length
 
 __all__ = ["close_member_field", "CLOSE_SIZE", "CLOSE_STEP"]
 
@@ -41,8 +42,7 @@ def _samples(locator: SurfaceLocator, specs, step: float):
     arc position along the member (k,))``; misses are dropped."""
     seeds, owner, arc = [], [], []
     for i, m in enumerate(specs):
-        coarse = m.seed_points(65)
-        length = float(norm_rows(np.diff(coarse, axis=0), axis=1).sum())
+        length = seed_curve_length(m)
         n = int(min(max(np.ceil(length / step) + 1, 2), 20000))
         pts = m.seed_points(n)
         seeds.append(pts)

@@ -13,7 +13,7 @@ from ..mesh import norm_rows
 from ..core.locator import SurfaceLocator
 
 __all__ = ["project_wing_stations", "project_polyline", "project_layout", "ProjectedMember", "MIN_MEMBER_HEIGHT",
-           "check_member_heights"]
+           "check_member_heights", "spar_heights", "seed_curve_length"]
 
 
 # ----------------------------------------------------------------------------- projection
@@ -187,6 +187,28 @@ def project_layout(locator: SurfaceLocator, layout, n_seeds: int = 5) -> dict:
     return {m.name: out[m.name] for m in specs}
 
 
+def seed_curve_length(m) -> float:
+    """Length of the chord-plane curve of the wing member ``m`` (a
+    :class:`~shellmesh_mdao.layout.MemberSpec`), measured on 65 of its seed points."""
+    return float(norm_rows(np.diff(m.seed_points(65), axis=0), axis=1).sum())
+
+
+def spar_heights(locator: SurfaceLocator, spars, counts):
+    """The web heights of the wing members ``spars`` at ``counts[i]`` points of member ``i``
+    strictly between its ends (of its chord-plane curve): the distance along its ``up`` between
+    the upper and lower skin hits of rays cast along ``+-up`` (inf where a ray misses). Returns
+    ``(points (k, 3), member index (k,), upper hits (k, 3), lower hits (k, 3), height (k,))``."""
+    seeds = [m.seed_points(int(c) + 2)[1:-1] for m, c in zip(spars, counts)]
+    own = np.repeat(np.arange(len(spars)), [len(s) for s in seeds])
+    o = np.vstack(seeds)
+    ups = np.stack([m.up for m in spars])[own]
+    hp, ti, _ = locator.raycast(np.vstack([o, o]), np.vstack([ups, -ups]))
+    k = len(o)
+    ok = (ti[:k] >= 0) & (ti[k:] >= 0)
+    height = np.where(ok, np.einsum("ij,ij->i", hp[:k] - hp[k:], ups), np.inf)
+    return o, own, hp[:k], hp[k:], height
+
+
 #: a spar web must be at least this many local element sizes tall everywhere along it (where it is
 #: lower than that at the element size, the mesh refines around it: ``thin_member_field``)
 MIN_MEMBER_HEIGHT = 0.3
@@ -210,13 +232,8 @@ def check_member_heights(locator: SurfaceLocator, layout, size: float, n: int = 
     spars = [m for m in lay.members() if m.kind == "spar"]
     if not spars:
         return {}
-    seeds = np.stack([m.seed_points(n + 2)[1:-1] for m in spars])            # (s, n, 3), ends excluded
-    ups = np.repeat(np.stack([m.up for m in spars]), n, axis=0)
-    o = seeds.reshape(-1, 3)
-    hp, ti, _ = locator.raycast(np.vstack([o, o]), np.vstack([ups, -ups]))
-    k = len(o)
-    ok = (ti[:k] >= 0) & (ti[k:] >= 0)
-    height = np.where(ok, np.einsum("ij,ij->i", hp[:k] - hp[k:], ups), np.inf).reshape(len(spars), n)
+    o, _, _, _, height = spar_heights(locator, spars, [n] * len(spars))          # ends excluded
+    height = height.reshape(len(spars), n)
     out = {}
     for i, m in enumerate(spars):
         j = int(np.argmin(height[i]))

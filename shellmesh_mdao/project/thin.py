@@ -21,8 +21,7 @@ import numpy as np
 
 from ..core.locator import SurfaceLocator
 from ..core.sizefield import SizeField
-from ..mesh import norm_rows
-from .seeds import MIN_MEMBER_HEIGHT
+from .seeds import MIN_MEMBER_HEIGHT, seed_curve_length, spar_heights
 
 __all__ = ["thin_member_field", "THIN_STEP", "THIN_HEIGHT"]
 
@@ -52,26 +51,13 @@ def thin_member_field(locator: SurfaceLocator, layout, size: float, step: float 
     if not spars:
         return SizeField()
     size = float(size)
-    seeds, owner = [], []
-    for i, m in enumerate(spars):
-        coarse = m.seed_points(65)
-        length = float(norm_rows(np.diff(coarse, axis=0), axis=1).sum())
-        n = int(min(max(np.ceil(length / (step * size)) + 1, 3), 20000))
-        pts = m.seed_points(n + 2)[1:-1]                 # ends excluded (check_member_heights' rule)
-        seeds.append(pts)
-        owner.append(np.full(len(pts), i))
-    o = np.vstack(seeds)
-    own = np.concatenate(owner)
-    ups = np.stack([spars[i].up for i in own])
-    hp, ti, _ = locator.raycast(np.vstack([o, o]), np.vstack([ups, -ups]))
-    k = len(o)
-    ok = (ti[:k] >= 0) & (ti[k:] >= 0)
-    height = np.where(ok, np.einsum("ij,ij->i", hp[:k] - hp[k:], ups), np.inf)
-    thin = np.flatnonzero(ok & (height < MIN_MEMBER_HEIGHT * size) & (height > 0))
+    counts = [min(max(np.ceil(seed_curve_length(m) / (step * size)) + 1, 3), 20000) for m in spars]
+    _, own, upper, lower, height = spar_heights(locator, spars, counts)      # ends excluded
+    thin = np.flatnonzero((height < MIN_MEMBER_HEIGHT * size) & (height > 0))
     if not len(thin):
         return SizeField()
     local = np.maximum(height[thin] / THIN_HEIGHT, MIN_LOCAL_SIZE * size)
-    pts = np.vstack([hp[:k][thin], hp[k:][thin]])
+    pts = np.vstack([upper[thin], lower[thin]])
     sizes = np.concatenate([local, local])
     reasons = []
     for i in np.unique(own[thin]):
